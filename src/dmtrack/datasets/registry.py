@@ -1,0 +1,127 @@
+"""Opening a sequence by path: format detection from the folder's contents, or a forced format.
+
+Detection order (first match wins): ``7scenes`` (``frame-*.color.*``), ``kitti`` (``image_0/`` or ``image_2/``
+with ``calib.txt``/``times.txt``), ``tum-rgbd`` (``rgb.txt``), ``image-folder`` (images in the folder or in
+``images/``).  ``synthetic`` is not a folder: ``synthetic`` or ``synthetic:key=value,…`` (keys of
+:class:`~dmtrack.datasets.synthetic.SyntheticConfig`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dmtrack.datasets import imagefolder, kitti, sevenscenes, tumrgbd
+from dmtrack.datasets.base import Sequence
+from dmtrack.datasets.intrinsics import parse_intrinsics
+from dmtrack.errors import DatasetError, InputError
+from dmtrack.geometry.camera import PinholeCamera
+
+
+@dataclass(frozen=True)
+class Reader:
+    name: str
+    detect: Callable[[Path], bool]
+    open: Callable[..., Sequence]
+    description: str
+
+
+READERS: dict[str, Reader] = {
+    r.name: r
+    for r in (
+        Reader("7scenes", sevenscenes.detect, sevenscenes.open_7scenes, "Microsoft 7-Scenes sequence folder"),
+        Reader("kitti", kitti.detect, kitti.open_kitti, "KITTI odometry (sequences/NN/image_0|image_2)"),
+        Reader("tum-rgbd", tumrgbd.detect, tumrgbd.open_tum_rgbd, "TUM RGB-D benchmark (rgb.txt)"),
+        Reader("image-folder", imagefolder.detect, imagefolder.open_image_folder,
+               "image folder (+ groundtruth.txt, times.txt, camera.txt)"),
+    )
+}
+FORMATS = (*READERS, "synthetic")
+
+
+def detect_format(path: str | Path) -> str:
+    """The format name of the sequence at ``path``; raises :class:`DatasetError` naming what was looked for."""
+    p = Path(path)
+    if str(path).split(":", 1)[0] == "synthetic":
+        return "synthetic"
+    if not p.exists():
+        raise DatasetError("no such file or folder", path=p)
+    if not p.is_dir():
+        raise DatasetError("a sequence is a folder (video files arrive with the datasets issue)", path=p)
+    for reader in READERS.values():
+        if reader.detect(p):
+            return reader.name
+    raise DatasetError(
+        "cannot recognise the sequence format (looked for 7-Scenes frame-*.color.*, KITTI image_0/ + calib.txt, "
+        "TUM RGB-D rgb.txt, or images in the folder or images/); use --format to force one",
+        path=p,
+    )
+
+
+def _parse_synthetic(spec: str) -> dict[str, Any]:
+    _, _, rest = spec.partition(":")
+    options: dict[str, Any] = {}
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise InputError(f"synthetic sequence option {item!r}: expected key=value")
+        for conv in (int, float):
+            try:
+                options[key.strip()] = conv(value)
+                break
+            except ValueError:
+                continue
+        else:
+            low = value.strip().lower()
+            options[key.strip()] = {"true": True, "false": False}.get(low, value.strip())
+    return options
+
+
+def open_sequence(
+    path: str | Path,
+    format: str | None = None,
+    intrinsics: str | PinholeCamera | None = None,
+    **options: Any,
+) -> Sequence:
+    """Open the sequence at ``path`` (a folder, or ``synthetic[:key=value,…]``).
+
+    Parameters
+    ----------
+    format : force a format (one of :data:`FORMATS`) instead of detecting it.
+    intrinsics : pinhole intrinsics replacing the dataset's — a camera, or the string ``"fx,fy,cx,cy"``
+        (pixels of the stored images).
+    **options : passed to the reader (e.g. ``camera_folder="image_2"`` for KITTI, ``fps=`` for an image folder).
+    """
+    seq = _open(path, format, **options)
+    if intrinsics is not None:
+        if isinstance(intrinsics, str):
+            intrinsics = parse_intrinsics(intrinsics, seq.width, seq.height)
+        elif (intrinsics.width, intrinsics.height) != (seq.width, seq.height):
+            raise InputError(
+                f"intrinsics are for {intrinsics.width}x{intrinsics.height}, the images are {seq.width}x{seq.height}"
+            )
+        seq.camera = intrinsics
+        if hasattr(seq, "details"):
+            seq.details["intrinsics_source"] = "given"
+    return seq
+
+
+def _open(path: str | Path, format: str | None, **options: Any) -> Sequence:
+    fmt = format or detect_format(path)
+    if fmt == "synthetic":
+        from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
+
+        spec = _parse_synthetic(str(path)) if str(path).startswith("synthetic") else {}
+        try:
+            config = SyntheticConfig(**{**spec, **options})
+        except TypeError as e:
+            raise InputError(f"synthetic sequence: {e}") from None
+        return SyntheticSequence(config)
+    if fmt not in READERS:
+        raise InputError(f"unknown format {fmt!r}; known formats: {', '.join(FORMATS)}")
+    p = Path(path)
+    if not p.exists():
+        raise DatasetError("no such file or folder", path=p)
+    return READERS[fmt].open(p, **options)

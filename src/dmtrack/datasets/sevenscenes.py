@@ -1,0 +1,101 @@
+"""Microsoft 7-Scenes, one sequence folder (``seq-01/`` or a copy of its files).
+
+Layout: ``frame-NNNNNN.color.png`` (or ``.color.jpg``) 640×480 colour, ``frame-NNNNNN.depth.png`` uint16
+millimetres (65535 = invalid; the depth camera is **not** registered to the colour camera), and
+``frame-NNNNNN.pose.txt`` a 4×4 camera-to-world matrix in metres.  The official release ships no
+intrinsics file; its documented calibration (fx = fy = 585, cx = 320, cy = 240) is used unless the folder
+has ``camera-intrinsics.txt`` (3×3 K).  Recorded at 30 Hz: timestamp = frame number / 30.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from dmtrack.datasets.base import FileSequence
+from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_file
+from dmtrack.errors import DatasetError, InputError
+from dmtrack.geometry.camera import PinholeCamera
+
+FORMAT = "7scenes"
+FPS = 30.0
+WIDTH, HEIGHT = 640, 480
+#: The calibration documented on the 7-Scenes page (used when the folder has no intrinsics file).
+DEFAULT_CAMERA = PinholeCamera(585.0, 585.0, 320.0, 240.0, WIDTH, HEIGHT)
+_FRAME_RE = re.compile(r"^frame-(\d+)\.color\.(png|jpg|jpeg)$", re.IGNORECASE)
+
+
+def detect(path: Path) -> bool:
+    return path.is_dir() and any(_FRAME_RE.match(p.name) for p in path.glob("frame-*.color.*"))
+
+
+def read_pose_file(path: Path) -> np.ndarray:
+    """A 4×4 pose matrix; NaN/inf (7-Scenes marks failed KinectFusion frames with -inf) → all-NaN.
+
+    The stored rotation blocks are not quite orthonormal (KinectFusion's matrices are scaled by
+    ~0.9997); they are projected to the nearest rotation (SVD), which moves no entry by more than 1e-3.
+    """
+    try:
+        values = np.loadtxt(path, dtype=np.float64)
+    except (ValueError, OSError) as e:
+        raise InputError(f"cannot read a 4×4 pose matrix ({e})", path=path) from None
+    if values.size != 16:
+        raise InputError(f"expected a 4×4 pose matrix (16 numbers), found {values.size}", path=path)
+    pose = values.reshape(4, 4)
+    if not np.isfinite(pose).all():
+        return np.full((4, 4), np.nan)
+    if not np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0), atol=1e-6):
+        raise InputError("the last row of the pose matrix must be 0 0 0 1", path=path)
+    u, sv, vt = np.linalg.svd(pose[:3, :3])
+    if np.linalg.det(u @ vt) < 0 or np.abs(sv - 1.0).max() > 0.05:
+        raise InputError(f"not a rotation (singular values {np.round(sv, 4).tolist()})", path=path)
+    pose[:3, :3] = u @ vt
+    return pose
+
+
+def open_7scenes(path: str | Path) -> FileSequence:
+    root = Path(path)
+    if not root.is_dir():
+        raise DatasetError("not a folder", path=root)
+    frames = sorted(
+        ((int(m.group(1)), p) for p in root.iterdir() if (m := _FRAME_RE.match(p.name))), key=lambda x: x[0]
+    )
+    if not frames:
+        seqs = sorted(p.name for p in root.glob("seq-*") if p.is_dir())
+        hint = f" — it has sequences {', '.join(seqs)}: pass one of them" if seqs else ""
+        raise DatasetError(f"no 7-Scenes frames (frame-NNNNNN.color.png){hint}", path=root)
+    numbers = np.asarray([n for n, _ in frames])
+    image_paths = [p for _, p in frames]
+    poses = np.full((len(frames), 4, 4), np.nan)
+    have_pose = False
+    for i, (n, _) in enumerate(frames):
+        pose_path = root / f"frame-{n:06d}.pose.txt"
+        if pose_path.is_file():
+            poses[i] = read_pose_file(pose_path)
+            have_pose = True
+    depth_paths: list[Path | None] = []
+    for n, _ in frames:
+        d = root / f"frame-{n:06d}.depth.png"
+        depth_paths.append(d if d.is_file() else None)
+    intr = find_intrinsics_file(root, ("camera-intrinsics.txt", "camera.txt", "intrinsics.txt"))
+    camera = DEFAULT_CAMERA if intr is None else read_intrinsics_file(intr, WIDTH, HEIGHT)
+    seq = FileSequence(
+        name=root.name,
+        format=FORMAT,
+        root=root,
+        image_paths=image_paths,
+        timestamps=numbers / FPS,
+        camera=camera,
+        poses=poses if have_pose else None,
+        depth_paths=depth_paths if any(d is not None for d in depth_paths) else None,
+        depth_scale=1.0 / 1000.0,
+        depth_invalid=65535,
+        size=(WIDTH, HEIGHT),
+        details={
+            "intrinsics_source": "documented 7-Scenes calibration" if intr is None else intr.name,
+            "depth_registered_to_colour": False,
+        },
+    )
+    return seq

@@ -1,0 +1,61 @@
+"""Pictures of inverse-depth maps, as LSD-SLAM's debug view and the paper's Figure 4.
+
+Pixels with a depth hypothesis are coloured by inverse depth (near = red, far = blue, through the
+rainbow); pixels with a **negative** inverse depth — geometrically impossible, a symptom of a wrong match —
+are painted magenta so that they stand out; pixels without a hypothesis show the dimmed grey image.
+Pure numpy + OpenCV: no matplotlib, so it works headless at full speed.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+NEGATIVE_COLOUR = (255, 0, 255)  # magenta, RGB
+
+
+def inverse_depth_image(
+    idepth: np.ndarray,
+    valid: np.ndarray,
+    image: np.ndarray,
+    idepth_range: tuple[float, float] | None = None,
+) -> np.ndarray:
+    """An (H, W, 3) uint8 RGB picture of an inverse-depth map over its image.
+
+    Parameters
+    ----------
+    idepth : (H, W) inverse depth (any scale: the keyframe's normalised units).
+    valid : (H, W) bool, pixels that carry a hypothesis.
+    image : (H, W) or (H, W, 3) uint8, drawn dimmed where there is no hypothesis.
+    idepth_range : (near, far) inverse depths mapped to red and blue; default: the 2nd/98th percentiles of
+        the valid positive inverse depths.
+    """
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    out = np.repeat((grey.astype(np.float32) * 0.5).astype(np.uint8)[:, :, None], 3, axis=2)
+    valid = valid & np.isfinite(idepth)
+    positive = valid & (idepth > 0)
+    negative = valid & (idepth <= 0)
+    if positive.any():
+        if idepth_range is None:
+            lo, hi = np.percentile(idepth[positive], [2, 98])
+        else:
+            lo, hi = idepth_range[1], idepth_range[0]
+            lo, hi = min(lo, hi), max(lo, hi)
+        t = np.clip((idepth[positive] - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+        # hue 120 (blue, far) .. 0 (red, near) in OpenCV's 0..180 hue scale
+        hsv = np.empty((t.size, 1, 3), np.uint8)
+        hsv[:, 0, 0] = np.round((1.0 - t) * 120).astype(np.uint8)
+        hsv[:, 0, 1] = 255
+        hsv[:, 0, 2] = 255
+        out[positive] = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[:, 0, :]
+    out[negative] = NEGATIVE_COLOUR
+    return out
+
+
+def write_png(path, image_rgb: np.ndarray) -> None:  # noqa: ANN001
+    """Write an RGB uint8 image as PNG (OpenCV wants BGR)."""
+    from pathlib import Path
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)):
+        raise OSError(f"{path}: cannot write the image")

@@ -1,0 +1,86 @@
+"""The command line: `dmtrack info` output contract and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dmtrack.cli import main
+
+CONTRACT_KEYS = {"format", "frames", "width", "height", "fx", "fy", "cx", "cy", "has_groundtruth"}
+
+
+def info_json(capsys: pytest.CaptureFixture[str], *args: str) -> dict:
+    assert main(["info", *args, "--json"]) == 0
+    out = capsys.readouterr().out
+    return json.loads(out)
+
+
+def test_info_sample(capsys: pytest.CaptureFixture[str], sample_dir: Path) -> None:
+    info = info_json(capsys, str(sample_dir))
+    assert CONTRACT_KEYS <= info.keys()
+    assert info["format"] == "7scenes" and info["frames"] == 300
+    assert (info["width"], info["height"]) == (640, 480)
+    assert (info["fx"], info["fy"], info["cx"], info["cy"]) == (585.0, 585.0, 320.0, 240.0)
+    assert info["has_groundtruth"] is True
+
+
+def test_info_shared(capsys: pytest.CaptureFixture[str], shared_dir: Path) -> None:
+    data = shared_dir / "data"
+    info = info_json(capsys, str(data / "7scenes-0000-0699"))
+    assert (info["frames"], info["width"], info["height"], info["has_groundtruth"]) == (700, 640, 480, True)
+    info = info_json(capsys, str(data / "kitti-odometry" / "sequences" / "06"))
+    assert (info["format"], info["frames"], info["width"], info["height"]) == ("kitti", 51, 1226, 370)
+    assert (info["crop16"]["width"], info["crop16"]["height"]) == (1216, 368)
+    assert info["has_groundtruth"] is True
+    info = info_json(capsys, str(data / "tsukuba-150"))
+    assert (info["frames"], info["has_groundtruth"], info["fx"]) == (150, True, None)
+    info = info_json(capsys, str(data / "tsukuba-150"), "--intrinsics", "615,615,320,240")
+    assert (info["fx"], info["cx"]) == (615.0, 320.0)
+
+
+def test_info_human_readable(capsys: pytest.CaptureFixture[str], sample_dir: Path) -> None:
+    assert main(["info", str(sample_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "300" in out and "640x480" in out and "fx=585" in out
+
+
+def test_errors_are_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    assert main(["info", str(tmp_path / "nope")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nope" in err[0] and "no such file or folder" in err[0]
+    assert main(["info", str(tmp_path), "--intrinsics", "1,2,3"]) == 1
+    assert "cannot recognise" in capsys.readouterr().err
+
+
+def test_console_script_runs(sample_dir: Path) -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "dmtrack.cli", "info", str(sample_dir), "--json"],
+        capture_output=True, text=True, check=True,
+    )
+    assert json.loads(out.stdout)["frames"] == 300
+    bad = subprocess.run([sys.executable, "-m", "dmtrack.cli", "info"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "sequence" in bad.stderr
+
+
+def test_eval_matches_evo_reference(capsys: pytest.CaptureFixture[str], shared_dir: Path) -> None:
+    tdir = shared_dir / "data" / "trajectories"
+    assert main(["eval", str(tdir / "KITTI_00_gt.txt"), str(tdir / "KITTI_00_ORB.txt"), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "matched_poses"} <= result.keys()
+    assert result["ate_rmse"] == pytest.approx(0.937709074, abs=1e-6)  # evo's figure for these files
+    assert result["matched_poses"] == 4541
+    gt, est = tdir / "freiburg1_xyz-groundtruth.txt", tdir / "freiburg1_xyz-rgbdslam.txt"
+    assert main(["eval", str(gt), str(est), "--format", "tum", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["ate_rmse"] == pytest.approx(0.013389385, abs=1e-6)
+
+
+def test_eval_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    (tmp_path / "gt.txt").write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n3 3 1 0 0 0 0 1\n")
+    (tmp_path / "est.txt").write_text("0 0 0 0 0 0 0 1\nbroken line\n")
+    assert main(["eval", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt")]) == 1
+    assert "est.txt:2" in capsys.readouterr().err

@@ -118,6 +118,65 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dmtrack.api import run_to_directory
+    from dmtrack.odometry.config import VOConfig
+
+    config = VOConfig.from_yaml(args.config) if args.config else VOConfig()
+    if args.set:
+        config = config.with_overrides(*args.set)
+    if args.continue_after_loss:
+        config = config.with_overrides("stop_on_loss=false")
+    out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
+    result = run_to_directory(
+        args.sequence,
+        out,
+        feature=args.feature,
+        config=config,
+        start=args.start,
+        max_frames=args.max_frames,
+        seed=args.seed,
+        format=args.format,
+        intrinsics=args.intrinsics,
+        r_l=args.r_l,
+        depth_images=not args.no_depth_images,
+        pointcloud=not args.no_pointcloud,
+        progress=None if args.progress is None else args.progress,
+    )
+    m = result.metrics
+    lost = "never lost" if m["lost_at"] is None else f"lost at frame {m['lost_at']} ({m['lost_reason']})"
+    print(f"{m['sequence']} [{m['feature']}]: tracked {m['tracked_frames']}/{m['total_frames']} frames, {lost}; "
+          f"{m['keyframes']} keyframes, {m.get('points', 0)} points")
+    print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms, "
+          f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms)")
+    if m.get("ate_rmse") is not None:
+        print(f"accuracy: RPE rotation {m['rpe_rot_deg_per_m']:.3f} deg/unit, translation angle "
+              f"{m['rpe_trans_angle_deg_per_m']:.3f} deg/unit (r_l = {m['r_l']:.4g}), ATE {m['ate_rmse']:.4f} "
+              f"(Sim3), {m['matched_poses']} poses")
+    elif "evaluation_error" in m:
+        print(f"accuracy: not evaluated ({m['evaluation_error']})")
+    print(f"outputs: {out}/")
+    return 0
+
+
+def cmd_features(args: argparse.Namespace) -> int:
+    from dmtrack.features.base import list_features
+
+    rows = list_features()
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'name':<16} {'N':>4}  {'scale':>8}  {'pyramid':<10} {'needs':<14} description")
+    for r in rows:
+        needs = ",".join(k for k in ("torch", "weights") if r.get(f"needs_{k}")) or "-"
+        scale = "-" if r.get("scale") is None else f"{r['scale']:.4g}"
+        print(f"{r['name']:<16} {r['channels']:>4}  {scale:>8}  {r.get('pyramid', ''):<10} {needs:<14} "
+              f"{r.get('description', '')}")
+    return 0
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from dmtrack.evaluation import evaluate
     from dmtrack.io.trajectory import read_trajectory
@@ -161,6 +220,30 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sequence_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("run", help="track a sequence and write trajectory, point cloud, depth images, metrics")
+    _add_sequence_args(p)
+    p.add_argument("--feature", default="gray", help="feature name (see `dmtrack features`; default gray)")
+    p.add_argument("--out", help="output folder (default out/SEQUENCE-FEATURE)")
+    p.add_argument("--start", type=int, default=0, metavar="N", help="first frame (default 0)")
+    p.add_argument("--max-frames", type=int, metavar="N", help="process at most N frames")
+    p.add_argument("--seed", type=int, metavar="S", help="seed of the random depth initialisation (default 0)")
+    p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override one parameter, e.g. --set tracker.huber_d=2 (repeatable)")
+    p.add_argument("--r-l", type=_fraction, metavar="R",
+                   help="RPE length ratio (default 1/20 for KITTI, 1/3 otherwise; the paper uses 1/20 for Tsukuba)")
+    p.add_argument("--continue-after-loss", action="store_true",
+                   help="keep going after a tracking loss (default: stop there, as the paper counts tracked frames)")
+    p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png")
+    p.add_argument("--no-pointcloud", action="store_true", help="do not write pointcloud.ply")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar (default: only on a terminal)")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("features", help="list the available features")
+    p.add_argument("--json", action="store_true", help="print a JSON list")
+    p.set_defaults(func=cmd_features)
 
     p = sub.add_parser(
         "eval",

@@ -1,0 +1,310 @@
+"""The Python API: track a sequence with a feature and get poses, keyframes, timings and metrics.
+
+>>> import dmtrack
+>>> result = dmtrack.track("data/7scenes-redkitchen-0000-0299", feature="gray", max_frames=100)  # doctest: +SKIP
+>>> result.trajectory, result.tracked_frames, result.metrics["rpe_rot_deg_per_m"]                # doctest: +SKIP
+
+:func:`track` runs the odometry and returns a :class:`RunResult`; :func:`run_to_directory` also writes the
+files of ``dmtrack run`` (``trajectory.txt``, ``keyframes.txt``, ``pointcloud.ply``, ``depth/``,
+``metrics.json``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dmtrack import __version__
+from dmtrack.datasets.base import Sequence
+from dmtrack.errors import DmtrackError, InputError
+from dmtrack.geometry.camera import PinholeCamera, crop_image
+from dmtrack.io.trajectory import Trajectory, _atomic_write
+from dmtrack.odometry.config import VOConfig
+from dmtrack.odometry.sink import MultiSink, OutputSink
+from dmtrack.odometry.vo import VisualOdometry, VOResult
+
+#: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
+R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
+DEFAULT_R_L = 1.0 / 3.0
+
+
+@dataclass
+class RunResult:
+    """Everything a run produced.
+
+    Attributes
+    ----------
+    trajectory : tracked frames' T_wc with the dataset's timestamps.
+    keyframes : keyframes' T_wc.
+    frame_indices : dataset frame index of each trajectory pose.
+    total_frames, tracked_frames : frames given to the odometry, frames with a pose.
+    lost_at, lost_reason : first frame (dataset index) where tracking was lost, and why; ``None`` if never.
+    timings_ms : mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction), ``pyramid``,
+        ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
+    metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
+    vo : the odometry's own summary.
+    """
+
+    trajectory: Trajectory
+    keyframes: Trajectory
+    frame_indices: np.ndarray
+    total_frames: int
+    tracked_frames: int
+    lost_at: int | None
+    lost_reason: str | None
+    timings_ms: dict[str, float]
+    metrics: dict[str, Any] = field(default_factory=dict)
+    vo: VOResult | None = None
+
+
+def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | None) -> Sequence:
+    if isinstance(sequence, (str, Path)):
+        from dmtrack.datasets import open_sequence
+
+        return open_sequence(sequence, format=format, intrinsics=intrinsics)
+    return sequence
+
+
+def _feature(feature: Any) -> Any:
+    from dmtrack.features.base import get_feature
+
+    return get_feature(feature) if isinstance(feature, str) else feature
+
+
+def track(
+    sequence: str | Path | Sequence,
+    feature: Any = "gray",
+    config: VOConfig | None = None,
+    *,
+    start: int = 0,
+    max_frames: int | None = None,
+    seed: int | None = None,
+    sink: OutputSink | None = None,
+    format: str | None = None,
+    intrinsics: str | None = None,
+    r_l: float | None = None,
+    progress: bool | None = False,
+) -> RunResult:
+    """Track ``sequence`` with ``feature``.
+
+    Parameters
+    ----------
+    sequence : a path (any format :func:`dmtrack.datasets.open_sequence` reads) or a Sequence.
+    feature : a registry name (``dmtrack features``) or a Feature object.
+    config : odometry parameters (LSD-SLAM defaults when None).
+    start, max_frames : process frames ``start … start + max_frames − 1``.
+    seed : seed of the random depth initialisation (overrides ``config.seed``).
+    sink : receives poses / keyframes / losses as they happen (e.g. :class:`RunDirectorySink`).
+    r_l : RPE length ratio for the metrics (default: 1/20 for KITTI, 1/3 otherwise).
+    progress : show a progress bar (None: only on a terminal).
+
+    Raises
+    ------
+    InputError
+        Bad sequence, missing intrinsics, bad arguments.
+    """
+    seq = _open(sequence, format, intrinsics)
+    if seq.camera is None:
+        raise InputError(
+            f"sequence {seq.name!r} has no intrinsics: pass intrinsics='fx,fy,cx,cy' (--intrinsics) or add camera.txt"
+        )
+    n = len(seq)
+    if not 0 <= start < n:
+        raise InputError(f"start frame {start} is outside the sequence (0..{n - 1})")
+    if max_frames is not None and max_frames < 1:
+        raise InputError(f"max_frames must be ≥ 1, got {max_frames}")
+    stop = n if max_frames is None else min(n, start + max_frames)
+    config = config or VOConfig()
+    if seed is not None:
+        config = config.with_overrides(f"seed={int(seed)}")
+    feat = _feature(feature)
+    if getattr(feat, "affine_brightness", False) and not config.tracker.affine:
+        config = config.with_overrides("tracker.affine=true")
+
+    camera, box = seq.camera.crop_to_multiple(16)
+    vo = VisualOdometry(camera, config, sink=sink)
+    n_levels = config.pyramid_levels
+    recompute = getattr(feat, "pyramid", "downsample") == "recompute"
+
+    t_io = t_feat = 0.0
+    frame_indices: list[int] = []
+    lost_reason: str | None = None
+    t_start = time.perf_counter()
+    bar = _progress(stop - start, seq.name, feat.name, progress)
+    try:
+        for i in range(start, stop):
+            t0 = time.perf_counter()
+            frame = seq[i]
+            image = crop_image(frame.image, box)
+            t1 = time.perf_counter()
+            fmap = feat.compute_pyramid(image, n_levels) if recompute else feat.compute(image)
+            t2 = time.perf_counter()
+            t_io += t1 - t0
+            t_feat += t2 - t1
+            res = vo.process(i, frame.timestamp, image, fmap)
+            if res.tracked:
+                frame_indices.append(i)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix_str(f"kf {vo.n_keyframes}", refresh=False)
+            if res.lost_reason is not None and lost_reason is None:
+                lost_reason = res.lost_reason
+            if vo.stopped:
+                break
+    finally:
+        vo_result = vo.finish()  # closes the sink: finished results reach disk even on an error
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t_start
+
+    processed = max(vo_result.total_frames, 1)
+    tm = vo_result.timings_ms
+    timings = {
+        "io": 1e3 * t_io / processed,
+        "feature": 1e3 * t_feat / processed,
+        "pyramid": tm.get("pyramid", 0.0),
+        "tracking": tm.get("tracking", 0.0),
+        "mapping": tm.get("mapping", 0.0),
+        "wall_s": wall,
+    }
+    traj = Trajectory(vo_result.timestamps, vo_result.poses)
+    kfs = Trajectory(
+        np.array([k.timestamp for k in vo_result.keyframes], dtype=np.float64),
+        np.array([k.T_wc for k in vo_result.keyframes], dtype=np.float64).reshape(-1, 4, 4),
+    )
+    result = RunResult(
+        trajectory=traj,
+        keyframes=kfs,
+        frame_indices=np.asarray(frame_indices, dtype=np.int64),
+        total_frames=stop - start,
+        tracked_frames=vo_result.tracked_frames,
+        lost_at=vo_result.lost_at,
+        lost_reason=lost_reason if vo_result.lost_at is not None else None,
+        timings_ms=timings,
+        vo=vo_result,
+    )
+    if r_l is None:
+        r_l = R_L_BY_FORMAT.get(seq.format, DEFAULT_R_L)
+    result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
+    return result
+
+
+def _progress(total: int, name: str, feature: str, enabled: bool | None):  # noqa: ANN202
+    if enabled is False:
+        return None
+    from tqdm import tqdm
+
+    disable = None if enabled is None else False  # None: tqdm turns itself off when not on a terminal
+    if os.environ.get("CI"):
+        disable = True
+    return tqdm(total=total, desc=f"{name} [{feature}]", unit="frame", disable=disable, dynamic_ncols=True)
+
+
+def _finite(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def metrics_dict(
+    result: RunResult,
+    seq: Sequence,
+    feature: Any,
+    config: VOConfig,
+    camera: PinholeCamera,
+    start: int,
+    r_l: float,
+) -> dict[str, Any]:
+    """The ``metrics.json`` contents (keys of conventions.md, plus more).
+
+    ``fps`` is frames processed per second of the whole loop (reading, features, tracking, mapping);
+    ``*_ms`` are means per processed frame; ``feature_ms`` includes building the feature pyramid.
+    RPE values are per unit of the ground truth's length (metres for every real dataset here; centimetres for
+    New Tsukuba).
+    """
+    t = result.timings_ms
+    processed = result.vo.total_frames if result.vo is not None else result.total_frames
+    m: dict[str, Any] = {
+        "feature": getattr(feature, "name", str(feature)),
+        "sequence": seq.name,
+        "format": seq.format,
+        "total_frames": int(result.total_frames),
+        "tracked_frames": int(result.tracked_frames),
+        "lost_at": None if result.lost_at is None else int(result.lost_at),
+        "lost_reason": result.lost_reason,
+        "fps": _finite(processed / t["wall_s"]) if t["wall_s"] > 0 else None,
+        "feature_ms": t["feature"] + t["pyramid"],
+        "tracking_ms": t["tracking"],
+        "mapping_ms": t["mapping"],
+        "io_ms": t["io"],
+        "pyramid_ms": t["pyramid"],
+        "wall_s": t["wall_s"],
+        "keyframes": len(result.keyframes),
+        "start": int(start),
+        "width": camera.width,
+        "height": camera.height,
+        "channels": int(getattr(feature, "channels", 0)),
+        "feature_scale": _finite(getattr(feature, "scale", None)),
+        "seed": int(config.seed),
+        "r_l": r_l,
+        "dmtrack_version": __version__,
+    }
+    gt = seq.groundtruth
+    if gt is not None:
+        from dmtrack.evaluation import evaluate
+
+        try:
+            ev = evaluate(gt, result.trajectory, max_diff=0.01, r_l=r_l, align="sim3")
+            for k in ("ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "matched_poses", "ate_scale"):
+                m[k] = ev[k]
+        except (DmtrackError, ValueError) as e:
+            m.update(ate_rmse=None, rpe_rot_deg_per_m=None, rpe_trans_angle_deg_per_m=None, matched_poses=0)
+            m["evaluation_error"] = str(e)
+    return m
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def run_to_directory(
+    sequence: str | Path | Sequence,
+    out_dir: str | Path,
+    feature: Any = "gray",
+    config: VOConfig | None = None,
+    *,
+    depth_images: bool = True,
+    pointcloud: bool = True,
+    extra_sinks: tuple[OutputSink, ...] = (),
+    **kwargs: Any,
+) -> RunResult:
+    """:func:`track` writing the run's files into ``out_dir`` (see :mod:`dmtrack.io.run_outputs`)."""
+    import yaml
+
+    from dmtrack.io.run_outputs import RunDirectorySink
+
+    out = Path(out_dir)
+    (out / "metrics.json").unlink(missing_ok=True)  # a stale metrics.json must not describe this run
+    config = config or VOConfig()
+    if kwargs.get("seed") is not None:
+        config = config.with_overrides(f"seed={int(kwargs.pop('seed'))}")
+    out.mkdir(parents=True, exist_ok=True)
+    _atomic_write(out / "config.yaml", yaml.safe_dump(_plain(config.to_dict()), sort_keys=False))
+    files = RunDirectorySink(out, depth_images=depth_images, pointcloud=pointcloud)
+    sink: OutputSink = MultiSink(files, *extra_sinks) if extra_sinks else files
+    result = track(sequence, feature, config, sink=sink, **kwargs)
+    result.metrics["points"] = files.n_points
+    _atomic_write(out / "metrics.json", json.dumps(result.metrics, indent=2) + "\n")
+    return result

@@ -1,0 +1,47 @@
+"""dmtrack.evaluation: timestamp association, Umeyama alignment and trajectory error metrics.
+
+Pure numpy; see :mod:`dmtrack.evaluation.metrics` for the definitions (the paper's §3.1 RPE).
+"""
+
+from dmtrack.evaluation.alignment import (
+    ALIGN_MODES,
+    AlignMode,
+    align_trajectory,
+    apply_sim3,
+    sim3_matrix,
+    umeyama,
+)
+from dmtrack.evaluation.association import associate, associate_trajectories
+from dmtrack.evaluation.metrics import (
+    UNDEFINED_ANGLE_DEG,
+    AteResult,
+    ErrorStats,
+    RpeResult,
+    RpeStats,
+    ate,
+    evaluate,
+    rpe,
+    rpe_pairs,
+    rpe_paper,
+)
+
+__all__ = [
+    "ALIGN_MODES",
+    "AlignMode",
+    "AteResult",
+    "ErrorStats",
+    "RpeResult",
+    "RpeStats",
+    "UNDEFINED_ANGLE_DEG",
+    "align_trajectory",
+    "apply_sim3",
+    "associate",
+    "associate_trajectories",
+    "ate",
+    "evaluate",
+    "rpe",
+    "rpe_pairs",
+    "rpe_paper",
+    "sim3_matrix",
+    "umeyama",
+]

@@ -23,6 +23,7 @@ $(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
 
 demo: $(VENV)/.installed
 	$(BIN)/dmtrack info $(SAMPLE)
+	$(BIN)/dmtrack run $(SAMPLE) --feature gray --out $(OUT)
 
 test: $(VENV)/.installed-dev
 	$(BIN)/ruff check src tests benchmarks

@@ -1,0 +1,121 @@
+"""End to end: `dmtrack run` / `dmtrack.api` on the synthetic renderer and on the shipped real sample."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dmtrack.api import run_to_directory, track
+from dmtrack.cli import main
+from dmtrack.errors import InputError
+from dmtrack.io.ply import read_ply
+from dmtrack.io.trajectory import read_tum
+
+SYNTH = "synthetic:n_frames=24,width=320,height=240,seed=2"
+CONTRACT = {
+    "feature", "sequence", "total_frames", "tracked_frames", "lost_at", "fps", "feature_ms", "tracking_ms",
+    "mapping_ms", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse", "matched_poses",
+}
+
+
+@pytest.fixture(scope="module")
+def synth_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    out = tmp_path_factory.mktemp("run")
+    result = run_to_directory(SYNTH, out, feature="gray", seed=0)
+    return out, result
+
+
+def test_run_writes_every_output(synth_run: tuple[Path, object]) -> None:
+    out, result = synth_run
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert CONTRACT <= metrics.keys()
+    assert metrics["total_frames"] == 24 and metrics["tracked_frames"] == 24 and metrics["lost_at"] is None
+    assert metrics["matched_poses"] == 24 and metrics["feature"] == "gray"
+    traj = read_tum(out / "trajectory.txt")
+    assert len(traj) == metrics["tracked_frames"]
+    np.testing.assert_allclose(traj.timestamps, np.arange(24) / 30.0, atol=1e-6)  # the dataset's timestamps
+    kfs = read_tum(out / "keyframes.txt")
+    assert len(kfs) == metrics["keyframes"] >= 1
+    assert len(list((out / "depth").glob("kf_*.png"))) == metrics["keyframes"]
+    pts, cols = read_ply(out / "pointcloud.ply")
+    assert pts.shape[0] == metrics["points"] > 1000 and cols is not None
+    assert np.isfinite(pts).all()
+    assert (out / "config.yaml").is_file()
+
+
+def test_synthetic_accuracy(synth_run: tuple[Path, object]) -> None:
+    """On exact synthetic data the grey VO must be accurate: small ATE relative to the path."""
+    from dmtrack.datasets import open_sequence
+
+    _, result = synth_run
+    m = result.metrics
+    gt_len = open_sequence(SYNTH).groundtruth.path_length()
+    assert gt_len > 0.1
+    assert m["ate_rmse"] < 0.05 * gt_len  # metres, after Sim(3) alignment
+    assert m["rpe_rot_deg_per_m"] < 20.0
+
+
+def test_same_seed_same_bytes(synth_run: tuple[Path, object], tmp_path: Path) -> None:
+    out, _ = synth_run
+    run_to_directory(SYNTH, tmp_path, feature="gray", seed=0, depth_images=False, pointcloud=False)
+    assert (tmp_path / "trajectory.txt").read_bytes() == (out / "trajectory.txt").read_bytes()
+    assert (tmp_path / "keyframes.txt").read_bytes() == (out / "keyframes.txt").read_bytes()
+
+
+def test_cli_run_on_shipped_sample(tmp_path: Path, sample_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["run", str(sample_dir), "--max-frames", "12", "--start", "5", "--out", str(tmp_path), "--no-progress"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "tracked 12/12 frames" in out
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert (m["total_frames"], m["tracked_frames"], m["start"], m["width"], m["height"]) == (12, 12, 5, 640, 480)
+    traj = read_tum(tmp_path / "trajectory.txt")
+    np.testing.assert_allclose(traj.timestamps[0], 5 / 30.0, atol=1e-6)
+
+
+def _loss_sequence(sample_dir: Path, root: Path, n_good: int) -> Path:
+    """An image folder: n_good real frames, then black frames nothing can be tracked against."""
+    (root / "images").mkdir(parents=True)
+    for i in range(n_good):
+        shutil.copy(sample_dir / f"frame-{i:06d}.color.jpg", root / "images" / f"{i:04d}.jpg")
+    for i in range(n_good, n_good + 3):
+        cv2.imwrite(str(root / "images" / f"{i:04d}.png"), np.zeros((480, 640), np.uint8))
+    (root / "camera.txt").write_text("585 585 320 240\n")
+    return root
+
+
+def test_tracking_loss_is_recorded(tmp_path: Path, sample_dir: Path) -> None:
+    seq = _loss_sequence(sample_dir, tmp_path / "seq", n_good=8)
+    from dmtrack.odometry.config import VOConfig
+
+    config = VOConfig().with_overrides("keyframe.loss_not_good_after=0")
+    result = run_to_directory(seq, tmp_path / "out", config=config, pointcloud=False, depth_images=False)
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["lost_at"] == 8 and m["tracked_frames"] == 8 and m["lost_reason"]
+    assert result.lost_at == 8
+    # everything finished before the loss is on disk
+    assert len(read_tum(tmp_path / "out" / "trajectory.txt")) == 8
+
+
+def test_missing_intrinsics_is_a_clear_error(tmp_path: Path, sample_dir: Path, capsys) -> None:  # noqa: ANN001
+    seq = _loss_sequence(sample_dir, tmp_path / "seq", n_good=2)
+    (seq / "camera.txt").unlink()
+    with pytest.raises(InputError, match="no intrinsics"):
+        track(seq, max_frames=2)
+    assert main(["run", str(seq), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert "no intrinsics" in err and "--intrinsics" in err
+
+
+def test_bad_arguments(sample_dir: Path) -> None:
+    with pytest.raises(InputError, match="start frame 400"):
+        track(sample_dir, start=400)
+    with pytest.raises(InputError, match="max_frames"):
+        track(sample_dir, max_frames=0)
+    with pytest.raises(InputError, match="unknown"):
+        track(sample_dir, feature="no-such-feature", max_frames=2)

@@ -73,7 +73,7 @@ def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str |
 
 
 def _feature(feature: Any) -> Any:
-    from dmtrack.features.base import get_feature
+    from dmtrack.features import get_feature
 
     return get_feature(feature) if isinstance(feature, str) else feature
 

@@ -162,7 +162,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_features(args: argparse.Namespace) -> int:
-    from dmtrack.features.base import list_features
+    from dmtrack.features import list_features
 
     rows = list_features()
     if args.json:

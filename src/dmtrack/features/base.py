@@ -1,0 +1,587 @@
+"""The :class:`Feature` interface and the feature registry.
+
+A *feature* turns an 8-bit image into a per-pixel N-channel float map that the odometry tracks instead of the
+intensity (paper §2.1).  Every feature carries its *default feature scale* (paper §2.4), a global factor already
+multiplied into :meth:`Feature.compute`'s output so that LSD-SLAM's 0..255 thresholds keep their meaning.
+
+Registry
+--------
+Features are looked up by name with :func:`get_feature`; :func:`list_features` describes them without building
+them.  An entry's factory may be given as a ``"package.module:attribute"`` string: the module is imported only
+when the feature is built, so entries that need PyTorch (``needs_torch=True``) cost nothing until used and
+:func:`list_features` never imports torch.
+
+Names of the form ``BASE-pcaK`` (e.g. ``alexnet-pca8``) build a PCA-reduced ``BASE`` with K channels
+(:class:`dmtrack.features.pca.ReducedFeature`); they need a basis (``pca=`` a :class:`PcaBasis` or a ``.npz``
+path written by :meth:`PcaBasis.save`).
+
+Plug-ins: after the built-in entries, the registry imports the modules named in :data:`PLUGIN_MODULES` if they
+exist (``dmtrack.features.learned``).  Such a module must not import torch at import time; it calls
+:func:`register` with string factories, e.g.
+``register("alexnet", "dmtrack.features.learned.alexnet:AlexNetFeature", channels=96, needs_colour=True,
+needs_torch=True, needs_weights=True, scale=1.23, description=...)``.
+
+Default scales
+--------------
+``default_scales.json`` (packaged next to this file) holds the calibrated default scale of each feature
+(:func:`dmtrack.features.scale.calibrate_scale`).  The scale used when ``get_feature`` gets none is, in order:
+the table's value, the ``scale`` given to :func:`register`, 1.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import json
+import re
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+import cv2
+import numpy as np
+
+from dmtrack.errors import InputError
+
+PyramidPolicy = Literal["downsample", "recompute"]
+_PYRAMID_POLICIES: tuple[str, ...] = get_args(PyramidPolicy)
+
+#: Optional modules imported once (if present) to register more features, e.g. the learned (torch) ones.
+PLUGIN_MODULES: tuple[str, ...] = ("dmtrack.features.learned",)
+
+_NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.]*(?:-[a-z0-9_.]+)*$")
+_PCA_RE = re.compile(r"^(?P<base>.+)-pca(?P<k>[0-9]+)$")
+
+
+# ----------------------------------------------------------------------------------------------- images
+def prepare_image(image: np.ndarray, colour: bool) -> np.ndarray:
+    """Validate an input image and convert it to what a feature needs.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        ``uint8`` or floating-point (values in 0..255; the "recompute" pyramid passes 2×2 box means, which are
+        float) image, ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA (alpha dropped).
+    colour : bool
+        True → return ``(H, W, 3)`` RGB (a grey image is replicated into three channels);
+        False → return ``(H, W)`` grey (colour is converted with OpenCV's RGB→grey weights
+        0.299 R + 0.587 G + 0.114 B, rounded for ``uint8``).
+
+    Returns
+    -------
+    np.ndarray
+        C-contiguous ``uint8`` (for ``uint8`` input) or ``float32`` array.
+
+    Raises
+    ------
+    InputError
+        Wrong dtype, number of dimensions or channels, or an empty image.
+    """
+    img = np.asarray(image)
+    if img.dtype == np.uint8:
+        pass
+    elif np.issubdtype(img.dtype, np.floating):
+        img = img.astype(np.float32, copy=False)
+    else:
+        raise InputError(f"feature input must be a uint8 or float image, got dtype {img.dtype}")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = img[:, :, :3]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+        raise InputError(f"feature input must be (H, W) grey or (H, W, 3) RGB, got shape {img.shape}")
+    if img.shape[0] < 1 or img.shape[1] < 1:
+        raise InputError(f"feature input image is empty: shape {img.shape}")
+    img = np.ascontiguousarray(img)
+    if colour and img.ndim == 2:
+        img = np.ascontiguousarray(np.repeat(img[:, :, None], 3, axis=2))
+    elif not colour and img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    return img
+
+
+def iter_images(images: Iterable[np.ndarray | str | Path]) -> Iterator[np.ndarray]:
+    """Yield arrays from an iterable of arrays or image paths (paths are read as stored: grey or RGB)."""
+    from dmtrack.io.images import read_image
+
+    for im in images:
+        if isinstance(im, (str, Path)):
+            yield read_image(im)
+        else:
+            yield np.asarray(im)
+
+
+def downsample_image(image: np.ndarray) -> np.ndarray:
+    """2×2 box mean of an image, ``(h, w[, 3])`` → ``(h//2, w//2[, 3])`` float32 (odd last row/column dropped)."""
+    f = np.asarray(image, dtype=np.float32)
+    h2, w2 = f.shape[0] // 2, f.shape[1] // 2
+    f = f[: 2 * h2, : 2 * w2]
+    out = (f[0::2, 0::2] + f[0::2, 1::2]) + (f[1::2, 0::2] + f[1::2, 1::2])
+    return np.ascontiguousarray(out * np.float32(0.25), dtype=np.float32)
+
+
+def downsample_feature(feat: np.ndarray) -> np.ndarray:
+    """Per-channel 2×2 box mean of a feature map, ``(h, w, N)`` → ``(h//2, w//2, N)`` float32."""
+    return downsample_image(feat)
+
+
+# ---------------------------------------------------------------------------------------------- feature
+class Feature(ABC):
+    """A dense per-pixel feature (paper §2.1).
+
+    Class attributes (instances may override them, e.g. when options change the channel count):
+
+    ``name`` – registry name; ``channels`` – N; ``needs_colour`` – uses the RGB input (grey input is then
+    replicated); ``needs_torch`` / ``needs_weights`` – needs PyTorch / downloaded weights; ``pyramid`` – pyramid
+    policy: ``"downsample"`` (box-downsample the level-0 feature map) or ``"recompute"`` (compute the feature on
+    the 2×2-box-downsampled image); ``affine_brightness`` – the odometry switches on LSD-SLAM's affine
+    brightness estimation (Gray-A); ``description`` – one line for listings.
+
+    Subclasses implement :meth:`_compute`.
+
+    Parameters
+    ----------
+    scale : float
+        Default feature scale (paper §2.4) multiplied into the output; must be finite and > 0.
+    """
+
+    name: str = ""
+    channels: int = 0
+    needs_colour: bool = False
+    needs_torch: bool = False
+    needs_weights: bool = False
+    pyramid: PyramidPolicy = "downsample"
+    affine_brightness: bool = False
+    description: str = ""
+
+    def __init__(self, scale: float = 1.0) -> None:
+        self.scale = check_scale(scale)
+
+    # -- to implement
+    @abstractmethod
+    def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        """Feature map times ``gain``.
+
+        Parameters
+        ----------
+        image : np.ndarray
+            Output of :func:`prepare_image` for ``self.needs_colour``: ``(H, W)`` grey or ``(H, W, 3)`` RGB,
+            ``uint8`` or ``float32`` in 0..255.
+        gain : float
+            Factor to multiply into the result (the scale, or 1 for :meth:`compute_unscaled`).
+
+        Returns
+        -------
+        np.ndarray
+            ``(H, W, channels)`` float32.
+        """
+
+    # -- public
+    def compute(self, image: np.ndarray) -> np.ndarray:
+        """Feature map of ``image`` multiplied by :attr:`scale`.
+
+        Parameters
+        ----------
+        image : np.ndarray
+            ``uint8`` (or float, 0..255) ``(H, W)`` grey or ``(H, W, 3)`` RGB image.
+
+        Returns
+        -------
+        np.ndarray
+            ``(H, W, N)`` float32, C-contiguous.
+        """
+        return self._run(image, self.scale)
+
+    def compute_unscaled(self, image: np.ndarray) -> np.ndarray:
+        """Feature map without the default scale (scale 1); same shapes as :meth:`compute`."""
+        return self._run(image, 1.0)
+
+    def compute_pyramid(self, image: np.ndarray, n_levels: int) -> list[np.ndarray]:
+        """Feature maps of an ``n_levels`` pyramid following :attr:`pyramid`.
+
+        Level l+1 is the per-channel 2×2 box mean of level l (``"downsample"``) or the feature of the 2×2
+        box-downsampled image of level l (``"recompute"``, float input).
+
+        Returns
+        -------
+        list of np.ndarray
+            ``n_levels`` float32 ``(H >> l, W >> l, N)`` maps (scaled).
+        """
+        if n_levels < 1:
+            raise InputError(f"n_levels must be ≥ 1, got {n_levels}")
+        img = prepare_image(image, self.needs_colour)
+        maps = [self._run(img, self.scale)]
+        for _ in range(1, n_levels):
+            if self.pyramid == "recompute":
+                img = downsample_image(img)
+                maps.append(self._run(img, self.scale))
+            else:
+                maps.append(downsample_feature(maps[-1]))
+        return maps
+
+    def info(self) -> dict[str, Any]:
+        """Description of this instance (the same keys as :func:`list_features`)."""
+        return {
+            "name": self.name,
+            "channels": int(self.channels),
+            "needs_colour": bool(self.needs_colour),
+            "needs_torch": bool(self.needs_torch),
+            "needs_weights": bool(self.needs_weights),
+            "pyramid": self.pyramid,
+            "scale": float(self.scale),
+            "description": self.description,
+        }
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, channels={self.channels}, scale={self.scale:g})"
+
+    # -- internals
+    def _run(self, image: np.ndarray, gain: float) -> np.ndarray:
+        img = prepare_image(image, self.needs_colour)
+        out = self._compute(img, float(gain))
+        if out.ndim == 2 and self.channels == 1:
+            out = out[:, :, None]
+        expected = (img.shape[0], img.shape[1], int(self.channels))
+        if out.shape != expected:
+            raise RuntimeError(f"feature {self.name!r} returned shape {out.shape}, expected {expected}")
+        return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def check_scale(scale: float) -> float:
+    """Validate a feature scale (finite, > 0) and return it as a float; :class:`InputError` otherwise."""
+    try:
+        s = float(scale)
+    except (TypeError, ValueError):
+        raise InputError(f"feature scale must be a number, got {scale!r}") from None
+    if not np.isfinite(s) or s <= 0:
+        raise InputError(f"feature scale must be finite and > 0, got {scale!r}")
+    return s
+
+
+# -------------------------------------------------------------------------------------- default scales
+@lru_cache(maxsize=1)
+def default_scales_table() -> dict[str, Any]:
+    """The packaged ``default_scales.json`` (``{"scales": {name: {"scale": float, ...}}, ...}``)."""
+    text = resources.files("dmtrack.features").joinpath("default_scales.json").read_text(encoding="utf-8")
+    table = json.loads(text)
+    if not isinstance(table, dict) or not isinstance(table.get("scales"), dict):
+        raise RuntimeError("dmtrack/features/default_scales.json is malformed (no 'scales' object)")
+    return table
+
+
+def default_scale(name: str) -> float | None:
+    """Calibrated default scale of feature ``name`` from ``default_scales.json``, or None when not listed."""
+    entry = default_scales_table()["scales"].get(name)
+    if entry is None:
+        return None
+    return float(entry["scale"])
+
+
+# --------------------------------------------------------------------------------------------- registry
+@dataclass(frozen=True)
+class FeatureEntry:
+    """A registry entry: how to build a feature and what it is, without building it.
+
+    ``factory`` is a callable ``factory(scale=..., **options) -> Feature`` or a lazily imported
+    ``"package.module:attribute"`` string naming one.
+    """
+
+    name: str
+    factory: Callable[..., Feature] | str
+    channels: int
+    needs_colour: bool = False
+    needs_torch: bool = False
+    needs_weights: bool = False
+    pyramid: PyramidPolicy = "downsample"
+    scale: float | None = None
+    description: str = ""
+
+    def resolve(self) -> Callable[..., Feature]:
+        """The factory callable (imports its module if given as a string)."""
+        if not isinstance(self.factory, str):
+            return self.factory
+        module_name, _, attr = self.factory.partition(":")
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name and exc.name.split(".")[0] in ("torch", "torchvision"):
+                raise InputError(
+                    f"feature {self.name!r} needs PyTorch, which is not installed "
+                    "(pip install 'dmtrack[learned]')"
+                ) from exc
+            raise
+        try:
+            return getattr(module, attr)
+        except AttributeError:
+            raise RuntimeError(f"feature {self.name!r}: {module_name} has no attribute {attr!r}") from None
+
+    def default_scale(self) -> float:
+        """The scale used when none is given: the packaged table's, else the registered one, else 1."""
+        s = default_scale(self.name)
+        if s is None:
+            s = self.scale
+        return 1.0 if s is None else float(s)
+
+
+_REGISTRY: dict[str, FeatureEntry] = {}
+_LOCK = threading.RLock()
+_PLUGINS_LOADED = False
+
+
+def register(
+    name: str,
+    factory: Callable[..., Feature] | str,
+    *,
+    channels: int,
+    needs_colour: bool = False,
+    needs_torch: bool = False,
+    needs_weights: bool = False,
+    pyramid: PyramidPolicy = "downsample",
+    scale: float | None = None,
+    description: str = "",
+    replace: bool = False,
+) -> FeatureEntry:
+    """Register a feature under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Lower-case name (letters, digits, ``_``, ``.``, ``-``); must not end in ``-pcaK`` (reserved for PCA).
+    factory : callable or str
+        ``factory(scale=float, **options) -> Feature``, or ``"package.module:attribute"`` imported on first use
+        (use this for features that need torch).
+    channels : int
+        N (the channels of the default options).
+    needs_colour, needs_torch, needs_weights, pyramid, description
+        As the :class:`Feature` attributes.
+    scale : float, optional
+        Default scale used when ``default_scales.json`` has no entry for ``name``.
+    replace : bool
+        Allow replacing an existing entry.
+
+    Returns
+    -------
+    FeatureEntry
+    """
+    if not isinstance(name, str) or not _NAME_RE.match(name) or _PCA_RE.match(name):
+        raise ValueError(f"invalid feature name {name!r}")
+    if isinstance(factory, str):
+        if ":" not in factory:
+            raise ValueError(f"a string factory must be 'package.module:attribute', got {factory!r}")
+    elif not callable(factory):
+        raise ValueError(f"factory for {name!r} must be callable or a 'module:attribute' string")
+    if int(channels) < 1:
+        raise ValueError(f"channels must be ≥ 1, got {channels}")
+    if pyramid not in _PYRAMID_POLICIES:
+        raise ValueError(f"pyramid must be one of {_PYRAMID_POLICIES}, got {pyramid!r}")
+    if scale is not None:
+        scale = check_scale(scale)
+    entry = FeatureEntry(
+        name=name,
+        factory=factory,
+        channels=int(channels),
+        needs_colour=bool(needs_colour),
+        needs_torch=bool(needs_torch),
+        needs_weights=bool(needs_weights),
+        pyramid=pyramid,
+        scale=scale,
+        description=description,
+    )
+    with _LOCK:
+        if name in _REGISTRY and not replace:
+            raise ValueError(f"feature {name!r} is already registered")
+        _REGISTRY[name] = entry
+    return entry
+
+
+def unregister(name: str) -> None:
+    """Remove ``name`` from the registry (no error when absent)."""
+    with _LOCK:
+        _REGISTRY.pop(name, None)
+
+
+def _load_plugins() -> None:
+    global _PLUGINS_LOADED
+    with _LOCK:
+        if _PLUGINS_LOADED:
+            return
+        _PLUGINS_LOADED = True
+        for module_name in PLUGIN_MODULES:
+            try:
+                importlib.import_module(module_name)
+            except ModuleNotFoundError as exc:
+                if exc.name is None or not module_name.startswith(exc.name):
+                    raise
+
+
+def _entries() -> dict[str, FeatureEntry]:
+    _load_plugins()
+    return _REGISTRY
+
+
+def feature_names() -> list[str]:
+    """Registered feature names, in registration order."""
+    return list(_entries())
+
+
+def get_entry(name: str) -> FeatureEntry:
+    """The registry entry of ``name``; :class:`InputError` listing the known names otherwise."""
+    entries = _entries()
+    key = name.strip().lower() if isinstance(name, str) else name
+    if key not in entries:
+        raise InputError(
+            f"unknown feature {name!r}; known features: {', '.join(entries)} "
+            "(a PCA-reduced feature is named BASE-pcaK, e.g. alexnet-pca8)"
+        )
+    return entries[key]
+
+
+def _accepted_options(factory: Callable[..., Any]) -> tuple[set[str], bool]:
+    try:
+        sig = inspect.signature(factory)
+    except (TypeError, ValueError):  # pragma: no cover - builtins without signature
+        return set(), True
+    names = {
+        p.name
+        for p in sig.parameters.values()
+        if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
+    var_kw = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values())
+    return names, var_kw
+
+
+def _build(entry: FeatureEntry, scale: float | None, options: dict[str, Any]) -> Feature:
+    factory = entry.resolve()
+    accepted, var_kw = _accepted_options(factory)
+    unknown = sorted(k for k in options if k not in accepted)
+    if unknown and not var_kw:
+        allowed = sorted(accepted - {"scale"})
+        raise InputError(
+            f"feature {entry.name!r} has no option(s) {', '.join(unknown)}; "
+            f"its options are: {', '.join(allowed) if allowed else '(none)'}"
+        )
+    s = entry.default_scale() if scale is None else check_scale(scale)
+    try:
+        feature = factory(scale=s, **options)
+    except InputError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"feature {entry.name!r}: {exc}") from exc
+    return feature
+
+
+def get_feature(name: str, **options: Any) -> Feature:
+    """Build the feature registered as ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A registered name (see :func:`list_features`), or ``BASE-pcaK`` for the first K principal components
+        of ``BASE`` (needs ``pca=``).
+    **options
+        ``scale`` (float; default: the calibrated default scale, see module docs) and the feature's own
+        options (e.g. ``sigma0``/``sigma1`` for bitplanes, ``cell_size`` for dsift).  For ``BASE-pcaK``:
+        ``pca`` (a :class:`~dmtrack.features.pca.PcaBasis` or a ``.npz`` path), ``base_scale`` (scale of the
+        base feature) and the base feature's options; ``scale`` then scales the reduced output.
+
+    Returns
+    -------
+    Feature
+
+    Raises
+    ------
+    InputError
+        Unknown name (the message lists the known ones), unknown option, missing PCA basis, missing torch.
+    """
+    if not isinstance(name, str) or not name.strip():
+        raise InputError(f"feature name must be a non-empty string, got {name!r}")
+    key = name.strip().lower()
+    scale = options.pop("scale", None)
+    entries = _entries()
+    m = _PCA_RE.match(key)
+    if m is not None and key not in entries:
+        from dmtrack.features.pca import PcaBasis, ReducedFeature
+
+        base_entry = get_entry(m.group("base"))
+        k = int(m.group("k"))
+        basis = options.pop("pca", None)
+        base_scale = options.pop("base_scale", None)
+        if basis is None:
+            raise InputError(
+                f"feature {name!r} needs a PCA basis: pass pca=PATH to a .npz written by PcaBasis.save "
+                f"(fit one with dmtrack.features.pca.fit_pca({base_entry.name!r}, images, k))"
+            )
+        if not isinstance(basis, PcaBasis):
+            basis = PcaBasis.load(basis)
+        base = _build(base_entry, base_scale, options)
+        return ReducedFeature(base, basis, k=k, scale=scale)
+    return _build(get_entry(key), scale, options)
+
+
+def as_feature(feature: str | Feature, **options: Any) -> Feature:
+    """``feature`` itself if it is a :class:`Feature` (or has ``compute``), else ``get_feature(feature, **options)``."""
+    if isinstance(feature, str):
+        return get_feature(feature, **options)
+    if options:
+        raise InputError("feature options can only be given with a feature name")
+    if not hasattr(feature, "compute"):
+        raise InputError(f"not a feature: {feature!r}")
+    return feature
+
+
+def list_features() -> list[dict[str, Any]]:
+    """All registered features (without building them or importing torch).
+
+    Returns
+    -------
+    list of dict
+        Keys ``name``, ``channels``, ``needs_colour``, ``needs_torch``, ``needs_weights``, ``pyramid``,
+        ``scale`` (the default scale), ``description``.
+    """
+    out = []
+    for e in _entries().values():
+        out.append(
+            {
+                "name": e.name,
+                "channels": e.channels,
+                "needs_colour": e.needs_colour,
+                "needs_torch": e.needs_torch,
+                "needs_weights": e.needs_weights,
+                "pyramid": e.pyramid,
+                "scale": e.default_scale(),
+                "description": e.description,
+            }
+        )
+    return out
+
+
+# ------------------------------------------------------------------------------------ built-in entries
+register(
+    "gray", "dmtrack.features.gray:GrayFeature", channels=1, scale=1.0,
+    description="grey intensity 0..255 (LSD-SLAM baseline)",
+)
+register(
+    "gray-affine", "dmtrack.features.gray:GrayAffineFeature", channels=1, scale=1.0,
+    description="grey intensity with LSD-SLAM's affine brightness estimation (Gray-A)",
+)
+register(
+    "rgb", "dmtrack.features.colour:RgbFeature", channels=3, needs_colour=True,
+    description="R, G, B channels 0..255",
+)
+register(
+    "lab", "dmtrack.features.colour:LabFeature", channels=3, needs_colour=True,
+    description="CIE L*a*b* (sRGB, D65) in OpenCV's 8-bit ranges: 2.55·L*, a*+128, b*+128 (float)",
+)
+register(
+    "bitplanes", "dmtrack.features.bitplanes:BitPlanesFeature", channels=8, pyramid="recompute",
+    description="Bit-Planes: 8 census-transform bits of the 3x3 neighbourhood (Alismail et al.)",
+)
+register(
+    "dsift", "dmtrack.features.dsift:DenseSiftFeature", channels=128,
+    description="dense SIFT at every pixel, single scale, no orientation (SIFT flow style, 4x4 cells x 8 bins)",
+)

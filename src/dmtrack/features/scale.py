@@ -1,0 +1,302 @@
+"""Default feature scale calibration (paper §2.4).
+
+LSD-SLAM's thresholds assume a 0..255 intensity.  Instead of retuning them, each feature is multiplied by one
+global factor s chosen so that the average number of *semi-dense* pixels — those whose gradient measure
+exceeds ``minUseGrad`` (5) — equals that of the grey image on the same sample images.
+
+Gradient measure (the one the odometry gates on, ``dmtrack.odometry.frame``): per channel the halved central
+differences ``½(F[x+1]−F[x−1])``, ``½(F[y+1]−F[y−1])``; the channel mean of ``sqrt(gx²+gy²)``; then LSD-SLAM's
+separable 3×3 max filter (``maxGradients``), zero on the one-pixel border.  A pixel counts when that value is
+``> min_use_grad`` (as the random depth initialisation's ``maxGrad > MIN_ABS_GRAD_CREATE``).
+``max_filter=False`` uses the measure before the max filter.
+
+Solving for s: the measure is positively homogeneous (``g(sF) = s·g(F)``), so the count at scale s is
+``#{g(F) > t/s}`` — a monotone step function of s.  Instead of bisecting on log s, the exact solution is read
+from the order statistics of the pooled unscaled values v₁ ≥ v₂ ≥ …: any s in ``(t/v_C, t/v_{C+1}]`` gives exactly
+the target total count C; the geometric midpoint ``s = t / sqrt(v_C · v_{C+1})`` is returned.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numba
+import numpy as np
+
+from dmtrack.features.base import Feature, as_feature, default_scale, default_scales_table, iter_images
+from dmtrack.io.images import read_image
+
+__all__ = [
+    "ScaleCalibration",
+    "calibrate_scale",
+    "calibrate_scale_detailed",
+    "channel_mean_gradient",
+    "count_semi_dense",
+    "default_scale",
+    "default_scales_table",
+    "compute_default_scales",
+]
+
+
+@numba.njit(cache=True)
+def _mean_grad_kernel(feat, gmean, max_grad, do_max):  # pragma: no cover - compiled
+    h, w, n = feat.shape
+    half = np.float32(0.5)
+    fn = np.float32(n)
+    gmean[:] = 0
+    max_grad[:] = 0
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            s = np.float32(0.0)
+            for c in range(n):
+                dx = half * (feat[y, x + 1, c] - feat[y, x - 1, c])
+                dy = half * (feat[y + 1, x, c] - feat[y - 1, x, c])
+                s += np.sqrt(dx * dx + dy * dy)
+            gmean[y, x] = s / fn
+    if not do_max:
+        return
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            m = gmean[y - 1, x - 1]
+            for yy in range(y - 1, y + 2):
+                for xx in range(x - 1, x + 2):
+                    v = gmean[yy, xx]
+                    if v > m:
+                        m = v
+            max_grad[y, x] = m
+
+
+def channel_mean_gradient(feat: np.ndarray, max_filter: bool = True) -> np.ndarray:
+    """The odometry's gradient measure of a feature map.
+
+    Parameters
+    ----------
+    feat : np.ndarray
+        ``(H, W, N)`` (or ``(H, W)``) feature map.
+    max_filter : bool
+        Apply the 3×3 max filter (LSD-SLAM's ``maxGradients``; the odometry's gates use it).
+
+    Returns
+    -------
+    np.ndarray
+        ``(H, W)`` float32; mean over channels of ``sqrt(gx² + gy²)`` (halved central differences), optionally
+        3×3-max-filtered; 0 on the one-pixel border.
+    """
+    f = np.asarray(feat)
+    if f.ndim == 2:
+        f = f[:, :, None]
+    f = np.ascontiguousarray(f, dtype=np.float32)
+    h, w, _ = f.shape
+    gmean = np.empty((h, w), np.float32)
+    mg = np.empty((h, w), np.float32)
+    _mean_grad_kernel(f, gmean, mg, bool(max_filter))
+    return mg if max_filter else gmean
+
+
+def count_semi_dense(feat: np.ndarray, min_use_grad: float = 5.0, max_filter: bool = True) -> int:
+    """Number of pixels whose gradient measure (:func:`channel_mean_gradient`) is ``> min_use_grad``."""
+    return int(np.count_nonzero(channel_mean_gradient(feat, max_filter) > min_use_grad))
+
+
+@dataclass(frozen=True)
+class ScaleCalibration:
+    """Result of :func:`calibrate_scale_detailed`.
+
+    Attributes
+    ----------
+    feature, reference : str
+        Names of the calibrated and the reference feature.
+    scale : float
+        Default feature scale (multiplies the feature's *unscaled* output).
+    target_count : float
+        Average semi-dense pixel count per image of the reference.
+    achieved_count : float
+        The same average for the feature at ``scale``.
+    n_images : int
+    min_use_grad : float
+    max_filter : bool
+    """
+
+    feature: str
+    reference: str
+    scale: float
+    target_count: float
+    achieved_count: float
+    n_images: int
+    min_use_grad: float
+    max_filter: bool
+
+
+def solve_scale(values: np.ndarray, target: int, threshold: float) -> float:
+    """The scale s whose count ``#{s·v > threshold}`` is closest to ``target``.
+
+    ``count(s)`` is a non-decreasing step function of s: with the distinct positive values u₁ > u₂ > … and
+    ``N_i = #{v ≥ u_i}``, every s in ``(t/u_i, t/u_{i+1}]`` gives ``N_i``.  The step i with ``N_i`` closest to the
+    target (the smaller s on a tie) is chosen and the geometric midpoint ``t / sqrt(u_i · u_{i+1})`` of its
+    interval returned (``2t/u_i`` for the last step).  With continuous values ``N_i`` hits the target exactly;
+    with discrete ones (e.g. unsmoothed Bit-Planes) the nearest attainable count is used.
+
+    Parameters
+    ----------
+    values : np.ndarray
+        Unscaled gradient measures (any shape; values ≤ 0 are ignored).
+    target : int
+        Count to match (≥ 1).
+    threshold : float
+        t (``min_use_grad``), > 0.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    v = v[v > 0]
+    if v.size == 0 or target < 1:
+        raise ValueError("solve_scale needs positive values and a target ≥ 1")
+    u, counts = np.unique(v, return_counts=True)  # ascending
+    u = u[::-1]
+    cum = np.cumsum(counts[::-1])  # cum[i] = #{v >= u[i]}
+    i = int(np.argmin(np.abs(cum - target)))
+    if i + 1 < u.size:
+        return float(threshold / np.sqrt(u[i] * u[i + 1]))
+    return float(2.0 * threshold / u[i])
+
+
+def calibrate_scale_detailed(
+    feature: str | Feature,
+    images: Iterable[np.ndarray | str | Path],
+    min_use_grad: float = 5.0,
+    *,
+    reference: str | Feature = "gray",
+    max_filter: bool = True,
+) -> ScaleCalibration:
+    """Default feature scale of ``feature`` with details (see :func:`calibrate_scale`)."""
+    from dmtrack.errors import InputError
+
+    feat = as_feature(feature)
+    ref = as_feature(reference)
+    t = float(min_use_grad)
+    if not t > 0:
+        raise InputError(f"min_use_grad must be > 0, got {min_use_grad!r}")
+    values: list[np.ndarray] = []
+    target = 0
+    n = 0
+    for img in iter_images(images):
+        target += count_semi_dense(ref.compute(img), t, max_filter)
+        fm = feat.compute_unscaled(img) if hasattr(feat, "compute_unscaled") else feat.compute(img) / feat.scale
+        g = channel_mean_gradient(fm, max_filter).ravel()
+        values.append(g[g > 0])
+        n += 1
+    if n == 0:
+        raise InputError("calibrate_scale needs at least one image")
+    if target == 0:
+        raise InputError(f"the reference {getattr(ref, 'name', ref)!r} has no pixel with gradient > {t} in the images")
+    v = np.concatenate(values)
+    if v.size < target:
+        raise InputError(
+            f"feature {getattr(feat, 'name', feat)!r} has only {v.size} pixels with a non-zero gradient, fewer than "
+            f"the reference's {target} semi-dense pixels: no scale matches"
+        )
+    s = solve_scale(v, target, t)
+    achieved = int(np.count_nonzero(v * np.float32(s) > t))
+    return ScaleCalibration(
+        feature=str(getattr(feat, "name", type(feat).__name__)),
+        reference=str(getattr(ref, "name", type(ref).__name__)),
+        scale=float(s),
+        target_count=target / n,
+        achieved_count=achieved / n,
+        n_images=n,
+        min_use_grad=t,
+        max_filter=bool(max_filter),
+    )
+
+
+def calibrate_scale(
+    feature: str | Feature,
+    images: Iterable[np.ndarray | str | Path],
+    min_use_grad: float = 5.0,
+    *,
+    reference: str | Feature = "gray",
+    max_filter: bool = True,
+) -> float:
+    """Default feature scale (paper §2.4): the global factor s that makes the average number of semi-dense
+    pixels of ``s × feature`` equal to that of ``reference`` (grey) on the same images.
+
+    Parameters
+    ----------
+    feature : str or Feature
+        Registry name or feature instance; its *unscaled* output is calibrated (its current scale is ignored).
+    images : iterable of np.ndarray or path
+        ``uint8`` images (grey or RGB), or image files.
+    min_use_grad : float
+        LSD-SLAM's ``minUseGrad`` (5 for the 0..255 intensity).
+    reference : str or Feature
+        The feature whose count is matched (``"gray"``, at its own scale).
+    max_filter : bool
+        Count on the 3×3-max-filtered measure (default; what the odometry gates on) or the raw channel mean.
+
+    Returns
+    -------
+    float
+        The scale s (to pass as ``get_feature(name, scale=s)``).
+    """
+    return calibrate_scale_detailed(
+        feature, images, min_use_grad, reference=reference, max_filter=max_filter
+    ).scale
+
+
+def compute_default_scales(
+    image_paths: Sequence[str | Path],
+    names: Sequence[str] = ("rgb", "lab", "bitplanes", "dsift"),
+    min_use_grad: float = 5.0,
+    options: dict[str, dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Calibrate several features on the same images and return a ``default_scales.json``-style table.
+
+    Parameters
+    ----------
+    image_paths : sequence of paths
+        Sample frames (read as RGB; grey features convert them).
+    names : sequence of str
+        Feature names to calibrate.
+    min_use_grad : float
+    options : dict, optional
+        Per-name feature options (default: each feature's defaults).
+
+    Returns
+    -------
+    dict
+        ``{"scales": {name: {"scale", "target_count", "achieved_count", "options"}}, "images": [...], ...}``.
+    """
+    images = [read_image(p) for p in image_paths]
+    options = options or {}
+    scales: dict[str, Any] = {}
+    for name in names:
+        opts = dict(options.get(name, {}))
+        cal = calibrate_scale_detailed(as_feature(name, **opts), images, min_use_grad)
+        scales[name] = {
+            "scale": round(cal.scale, 4),
+            "target_count": round(cal.target_count, 1),
+            "achieved_count": round(cal.achieved_count, 1),
+            "options": opts,
+        }
+    return {
+        "scales": scales,
+        "images": [str(p) for p in image_paths],
+        "min_use_grad": min_use_grad,
+        "max_filter": True,
+    }
+
+
+def _main() -> None:  # pragma: no cover - maintenance entry point (python -m dmtrack.features.scale FRAMES...)
+    import sys
+
+    paths = sys.argv[1:]
+    if not paths:
+        print("usage: python -m dmtrack.features.scale IMAGE...", file=sys.stderr)
+        raise SystemExit(2)
+    print(json.dumps(compute_default_scales(paths), indent=2))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    _main()

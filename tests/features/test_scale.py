@@ -1,0 +1,177 @@
+"""Default feature scale calibration (paper §2.4)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dmtrack.errors import InputError
+from dmtrack.features import get_feature
+from dmtrack.features.base import Feature, default_scale, default_scales_table
+from dmtrack.features.scale import (
+    calibrate_scale,
+    calibrate_scale_detailed,
+    channel_mean_gradient,
+    count_semi_dense,
+    solve_scale,
+)
+
+
+def _images(n: int = 3, h: int = 48, w: int = 64) -> list[np.ndarray]:
+    rng = np.random.default_rng(11)
+    out = []
+    for _ in range(n):
+        img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        out.append(cv2.GaussianBlur(img, (7, 7), 2.0))
+    return out
+
+
+def _numpy_measure(feat: np.ndarray, max_filter: bool) -> np.ndarray:
+    f = feat.astype(np.float64)
+    gx = np.zeros_like(f)
+    gy = np.zeros_like(f)
+    gx[1:-1, 1:-1] = 0.5 * (f[1:-1, 2:] - f[1:-1, :-2])
+    gy[1:-1, 1:-1] = 0.5 * (f[2:, 1:-1] - f[:-2, 1:-1])
+    g = np.sqrt(gx**2 + gy**2).mean(axis=2)
+    if not max_filter:
+        return g
+    m = np.zeros_like(g)
+    win = np.lib.stride_tricks.sliding_window_view(g, (3, 3))
+    m[1:-1, 1:-1] = win.max(axis=(2, 3))
+    return m
+
+
+@pytest.mark.parametrize("max_filter", [True, False])
+def test_channel_mean_gradient_definition(max_filter: bool) -> None:
+    rng = np.random.default_rng(0)
+    feat = (rng.random((20, 30, 5)) * 50).astype(np.float32)
+    np.testing.assert_allclose(channel_mean_gradient(feat, max_filter), _numpy_measure(feat, max_filter),
+                               rtol=1e-5, atol=1e-5)
+
+
+def test_measure_is_the_odometrys_max_grad() -> None:
+    frame = pytest.importorskip("dmtrack.odometry.frame")
+    rng = np.random.default_rng(1)
+    feat = (rng.random((24, 40, 8)) * 255).astype(np.float32)
+    _, _, mg = frame.gradients(feat)
+    np.testing.assert_array_equal(channel_mean_gradient(feat), mg)
+
+
+class _Scaled(Feature):
+    """gray × a constant factor (unscaled output)."""
+
+    channels = 1
+
+    def __init__(self, factor: float, scale: float = 1.0) -> None:
+        super().__init__(scale)
+        self.factor = factor
+        self.name = f"gray×{factor}"
+
+    def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        return (image.astype(np.float32) * np.float32(self.factor * gain))[:, :, None]
+
+
+def test_gray_against_itself_is_one() -> None:
+    imgs = _images()
+    cal = calibrate_scale_detailed("gray", imgs)
+    assert cal.scale == pytest.approx(1.0, rel=0.02)
+    assert cal.achieved_count == cal.target_count
+    assert cal.n_images == 3 and cal.reference == "gray" and cal.max_filter
+
+
+def test_feature_times_two_calibrates_to_half() -> None:
+    imgs = _images()
+    s1 = calibrate_scale("gray", imgs)
+    s2 = calibrate_scale(_Scaled(2.0), imgs)
+    assert s2 == pytest.approx(s1 / 2, rel=1e-6)
+    assert s2 == pytest.approx(0.5, rel=0.02)
+    # the feature's current scale is ignored: the result always multiplies the unscaled output
+    assert calibrate_scale(_Scaled(2.0, scale=7.0), imgs) == pytest.approx(s2, rel=1e-9)
+
+
+def test_calibrated_scale_matches_the_count() -> None:
+    imgs = _images()
+    target = np.mean([count_semi_dense(get_feature("gray").compute(im)) for im in imgs])
+    lab = get_feature("lab", scale=1.0)
+    s = calibrate_scale(lab, imgs)
+    got = np.mean([count_semi_dense(get_feature("lab", scale=s).compute(im)) for im in imgs])
+    assert abs(got - target) <= 1.0  # continuous values: exact up to float32 rounding at the threshold
+    # and the count moves away on either side (it is a real match, not a coincidence)
+    lo = np.mean([count_semi_dense(get_feature("lab", scale=0.8 * s).compute(im)) for im in imgs])
+    hi = np.mean([count_semi_dense(get_feature("lab", scale=1.25 * s).compute(im)) for im in imgs])
+    assert lo < target < hi
+
+
+def test_min_use_grad_and_max_filter_options() -> None:
+    imgs = _images()
+    a = calibrate_scale_detailed(_Scaled(3.0), imgs, min_use_grad=2.0, max_filter=False)
+    assert a.scale == pytest.approx(1 / 3, rel=0.03) and not a.max_filter and a.min_use_grad == 2.0
+    b = calibrate_scale_detailed("gray", imgs, max_filter=False)
+    c = calibrate_scale_detailed("gray", imgs, max_filter=True)
+    assert b.target_count < c.target_count
+
+
+def test_accepts_paths(tmp_path: Path) -> None:
+    imgs = _images(2)
+    paths = []
+    for i, im in enumerate(imgs):
+        p = tmp_path / f"{i}.png"
+        cv2.imwrite(str(p), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+        paths.append(p)
+    assert calibrate_scale("rgb", paths) == pytest.approx(calibrate_scale("rgb", imgs), rel=1e-9)
+
+
+def test_solve_scale_on_steps() -> None:
+    # discrete values: 10 at 1.0, 10 at 0.5, 10 at 0.25 → counts 10, 20, 30 at s > t/1, t/0.5, t/0.25
+    v = np.repeat([1.0, 0.5, 0.25], 10)
+    s = solve_scale(v, 20, 5.0)
+    assert 10.0 < s <= 20.0 and np.count_nonzero(v * s > 5.0) == 20
+    s = solve_scale(v, 17, 5.0)  # not attainable: nearest step (20)
+    assert np.count_nonzero(v * s > 5.0) == 20
+    s = solve_scale(v, 30, 5.0)
+    assert np.count_nonzero(v * s > 5.0) == 30
+
+
+def test_errors() -> None:
+    flat = [np.full((16, 16), 90, np.uint8)]
+    with pytest.raises(InputError, match="no pixel with gradient"):
+        calibrate_scale("rgb", flat)
+    with pytest.raises(InputError, match="at least one image"):
+        calibrate_scale("rgb", [])
+    with pytest.raises(InputError, match="min_use_grad"):
+        calibrate_scale("rgb", _images(1), min_use_grad=0)
+
+
+def test_packaged_table() -> None:
+    table = default_scales_table()
+    assert table["min_use_grad"] == 5.0 and table["max_filter"] is True
+    for name in ("gray", "rgb", "lab", "bitplanes", "dsift"):
+        assert default_scale(name) > 0
+    assert default_scale("gray") == 1.0
+    assert default_scale("not-a-feature") is None
+    assert get_feature("bitplanes").scale == default_scale("bitplanes")
+
+
+def _table_images(sample_dir: Path) -> list[Path]:
+    return sorted(sample_dir.glob("frame-*.color.jpg"))[::15]
+
+
+@pytest.mark.parametrize("name", ["rgb", "lab", "bitplanes"])
+def test_packaged_scales_are_reproduced_on_the_sample(sample_dir: Path, name: str) -> None:
+    """The table's numbers come from the repository's sample (20 frames, every 15th)."""
+    entry = default_scales_table()["scales"][name]
+    paths = _table_images(sample_dir)
+    assert len(paths) == 20
+    cal = calibrate_scale_detailed(get_feature(name, **entry["options"]), paths)
+    assert cal.scale == pytest.approx(entry["scale"], abs=1e-4)
+    assert cal.target_count == pytest.approx(entry["target_count"], abs=0.1)
+
+
+@pytest.mark.slow
+def test_packaged_dsift_scale_is_reproduced(sample_dir: Path) -> None:
+    entry = default_scales_table()["scales"]["dsift"]
+    cal = calibrate_scale_detailed(get_feature("dsift", **entry["options"]), _table_images(sample_dir))
+    assert cal.scale == pytest.approx(entry["scale"], abs=1e-4)

@@ -1,0 +1,738 @@
+"""Numba kernels of the SE(3) tracker, each with a plain numpy reference (``*_numpy``).
+
+The kernels implement lsd-slam-spec.md §1 (inverse-depth pyramid, reference point cloud) and §2 (residual
+pass with weights, normal equations) generalised to N channels (§4.3): the residual, its weights and Huber
+are per channel; the 6×6 system is accumulated on the fly from per-point 2×2 sums
+``S = Σ_c W_c g_c g_cᵀ`` and 2-vectors ``s = Σ_c W_c r_c g_c`` with ``g_c = (fx·∂F_c/∂x, fy·∂F_c/∂y)``, so the
+(NV)×6 Jacobian never exists: ``J_c = g_cᵀ·M`` with the 2×6 projection derivative ``M`` of the point, hence
+``A = Σ_p Mᵀ S M`` and ``b = Σ_p Mᵀ s``.
+
+All kernels are sequential (no parallel reductions), so results are bit-reproducible run to run.
+Arithmetic is float64 on float32 storage.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+#: Columns of the per-point buffer written by :func:`eval_pass`: x', y', z' (point in the frame's camera),
+#: Sxx, Sxy, Syy (Σ_c W g gᵀ), sx, sy (Σ_c W r g); all zero for points outside the image.
+BUF_COLS = 8
+
+
+# ============================================================================== tracking reference (§1)
+@numba.njit(cache=True)
+def idepth_downsample(idepth: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """Inverse-variance-weighted 2×2 mean of the valid (var > 0) children; none valid → (−1, −1).
+
+    ``idepth = Σ(d_i/σ_i²) / Σ(1/σ_i²)``, ``var = n / Σ(1/σ_i²)``. Inputs (h, w) float32, outputs
+    (h//2, w//2) float32.
+    """
+    h2 = idepth.shape[0] // 2
+    w2 = idepth.shape[1] // 2
+    out_d = np.empty((h2, w2), np.float32)
+    out_v = np.empty((h2, w2), np.float32)
+    for y in range(h2):
+        for x in range(w2):
+            isum = 0.0
+            dsum = 0.0
+            num = 0
+            for dy in range(2):
+                for dx in range(2):
+                    v = var[2 * y + dy, 2 * x + dx]
+                    if v > 0:
+                        iv = 1.0 / v
+                        isum += iv
+                        dsum += iv * idepth[2 * y + dy, 2 * x + dx]
+                        num += 1
+            if num > 0:
+                out_d[y, x] = dsum / isum
+                out_v[y, x] = num / isum
+            else:
+                out_d[y, x] = -1.0
+                out_v[y, x] = -1.0
+    return out_d, out_v
+
+
+def idepth_downsample_numpy(idepth: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`idepth_downsample`."""
+    d = idepth.astype(np.float64)
+    v = var.astype(np.float64)
+    isum = np.zeros((d.shape[0] // 2, d.shape[1] // 2))
+    dsum = np.zeros_like(isum)
+    num = np.zeros(isum.shape, np.int64)
+    for dy in range(2):
+        for dx in range(2):
+            vv = v[dy::2, dx::2]
+            dd = d[dy::2, dx::2]
+            ok = vv > 0
+            iv = np.where(ok, 1.0 / np.where(ok, vv, 1.0), 0.0)
+            isum += iv
+            dsum += np.where(ok, iv * dd, 0.0)
+            num += ok
+    has = num > 0
+    safe = np.where(has, isum, 1.0)
+    out_d = np.where(has, dsum / safe, -1.0).astype(np.float32)
+    out_v = np.where(has, num / safe, -1.0).astype(np.float32)
+    return out_d, out_v
+
+
+@numba.njit(cache=True)
+def make_points(
+    idepth: np.ndarray, var: np.ndarray, feat: np.ndarray, fx: float, fy: float, cx: float, cy: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """Reference point cloud of one level: interior pixels with var > 0 and idepth ≠ 0, row-major order.
+
+    Returns points (n, 3) float32 = (1/d)·K⁻¹(x, y, 1), values (n, N) float32, variances (n,) float32 and the
+    flat pixel index y·w + x (n,) int32.
+    """
+    h, w = idepth.shape
+    nch = feat.shape[2]
+    n = 0
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            if var[y, x] > 0 and idepth[y, x] != 0:
+                n += 1
+    pts = np.empty((n, 3), np.float32)
+    vals = np.empty((n, nch), np.float32)
+    vrs = np.empty(n, np.float32)
+    idx = np.empty(n, np.int32)
+    fxi = 1.0 / fx
+    fyi = 1.0 / fy
+    cxi = -cx / fx
+    cyi = -cy / fy
+    k = 0
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            if var[y, x] > 0 and idepth[y, x] != 0:
+                depth = 1.0 / idepth[y, x]
+                pts[k, 0] = depth * (fxi * x + cxi)
+                pts[k, 1] = depth * (fyi * y + cyi)
+                pts[k, 2] = depth
+                for c in range(nch):
+                    vals[k, c] = feat[y, x, c]
+                vrs[k] = var[y, x]
+                idx[k] = y * w + x
+                k += 1
+    return pts, vals, vrs, idx
+
+
+def make_points_numpy(
+    idepth: np.ndarray, var: np.ndarray, feat: np.ndarray, fx: float, fy: float, cx: float, cy: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`make_points`."""
+    h, w = idepth.shape
+    mask = np.zeros((h, w), bool)
+    mask[1:-1, 1:-1] = (var[1:-1, 1:-1] > 0) & (idepth[1:-1, 1:-1] != 0)
+    ys, xs = np.nonzero(mask)  # row-major order
+    depth = 1.0 / idepth[ys, xs].astype(np.float64)
+    pts = np.stack(
+        [depth * (xs * (1.0 / fx) + (-cx / fx)), depth * (ys * (1.0 / fy) + (-cy / fy)), depth], axis=1
+    ).astype(np.float32)
+    vals = feat[ys, xs, :].astype(np.float32)
+    return pts, vals, var[ys, xs].astype(np.float32), (ys * w + xs).astype(np.int32)
+
+
+# ============================================================================== residual pass (§2, §4.3)
+#: Points per block of the blocked kernels. Partial sums are formed per block and combined in block order, so
+#: the serial and the parallel (prange) kernels give bit-identical results, whatever the thread count.
+BLOCK = 1024
+
+#: Indices into the float64 parameter vector of :func:`eval_pass`.
+P_FX, P_FY, P_CX, P_CY, P_A, P_B, P_VAR_WEIGHT, P_NOISE2, P_HUBER_HALF, P_GOOD_C, P_GOOD_G, P_AFF_THR = range(12)
+N_PARAMS = 12
+
+#: Columns of the per-block partial sums of :func:`eval_pass`.
+_NE = 10
+
+
+def eval_params(
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    aff_a: float,
+    aff_b: float,
+    var_weight: float,
+    noise2: float,
+    huber_half: float,
+    good_c: float,
+    good_g: float,
+    aff_thr: float,
+) -> np.ndarray:
+    """Pack the scalar parameters of :func:`eval_pass` into a float64 vector (order of the ``P_*`` indices)."""
+    return np.array([fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr], np.float64)
+
+
+@numba.njit(cache=True, inline="always")
+def _eval_block(
+    blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags, buf, part
+):  # pragma: no cover - compiled
+    n = points.shape[0]
+    nch = ref_vals.shape[1]
+    h = packed.shape[0]
+    w = packed.shape[1]
+    fx = prm[P_FX]
+    fy = prm[P_FY]
+    cx = prm[P_CX]
+    cy = prm[P_CY]
+    aff_a = prm[P_A]
+    aff_b = prm[P_B]
+    var_weight = prm[P_VAR_WEIGHT]
+    noise2 = prm[P_NOISE2]
+    huber_half = prm[P_HUBER_HALF]
+    huber2 = huber_half * huber_half
+    good_den_c = nch * prm[P_GOOD_C]
+    good_g = prm[P_GOOD_G]
+    aff_thr = prm[P_AFF_THR]
+    r00 = T[0, 0]
+    r01 = T[0, 1]
+    r02 = T[0, 2]
+    r10 = T[1, 0]
+    r11 = T[1, 1]
+    r12 = T[1, 2]
+    r20 = T[2, 0]
+    r21 = T[2, 1]
+    r22 = T[2, 2]
+    tx = T[0, 3]
+    ty = T[1, 3]
+    tz = T[2, 3]
+    umax = w - 2.0
+    vmax = h - 2.0
+    n_in = 0
+    err = 0.0
+    good = 0
+    bad = 0
+    usage = 0.0
+    a_xx = 0.0
+    a_yy = 0.0
+    a_x = 0.0
+    a_y = 0.0
+    a_w = 0.0
+    i0 = blk * BLOCK
+    i1 = min(n, i0 + BLOCK)
+    for i in range(i0, i1):
+        px = np.float64(points[i, 0])
+        py = np.float64(points[i, 1])
+        pz = np.float64(points[i, 2])
+        wx = r00 * px + r01 * py + r02 * pz + tx
+        wy = r10 * px + r11 * py + r12 * pz + ty
+        wz = r20 * px + r21 * py + r22 * pz + tz
+        iz = 1.0 / wz
+        u = (wx * iz) * fx + cx
+        v = (wy * iz) * fy + cy
+        if not (u > 1.0 and v > 1.0 and u < umax and v < vmax):
+            if write_flags:
+                flags[ref_idx[i]] = False
+            for k in range(8):
+                buf[i, k] = 0.0
+            continue
+        ix = int(u)
+        iy = int(v)
+        dx = u - ix
+        dy = v - iy
+        dxdy = dx * dy
+        w11 = dxdy
+        w01 = dy - dxdy
+        w10 = dx - dxdy
+        w00 = 1.0 - dx - dy + dxdy
+        s2 = var_weight * ref_vars[i]
+        zd = pz * iz * iz  # 1 / (z'² d) with d = 1/z_ref
+        g0 = (tx * wz - tz * wx) * zd
+        g1 = (ty * wz - tz * wy) * zd
+        sxx = 0.0
+        sxy = 0.0
+        syy = 0.0
+        bx = 0.0
+        by = 0.0
+        r2sum = 0.0
+        g2sum = 0.0
+        for c in range(nch):
+            iv = (
+                w11 * packed[iy + 1, ix + 1, c, 0]
+                + w01 * packed[iy + 1, ix, c, 0]
+                + w10 * packed[iy, ix + 1, c, 0]
+                + w00 * packed[iy, ix, c, 0]
+            )
+            gx = (
+                w11 * packed[iy + 1, ix + 1, c, 1]
+                + w01 * packed[iy + 1, ix, c, 1]
+                + w10 * packed[iy, ix + 1, c, 1]
+                + w00 * packed[iy, ix, c, 1]
+            )
+            gy = (
+                w11 * packed[iy + 1, ix + 1, c, 2]
+                + w01 * packed[iy + 1, ix, c, 2]
+                + w10 * packed[iy, ix + 1, c, 2]
+                + w00 * packed[iy, ix, c, 2]
+            )
+            c1 = aff_a * ref_vals[i, c] + aff_b
+            r = c1 - iv
+            if affine_sums:
+                ar = abs(r)
+                aw = 1.0 if ar < aff_thr else aff_thr / ar
+                a_xx += c1 * c1 * aw
+                a_yy += iv * iv * aw
+                a_x += c1 * aw
+                a_y += iv * aw
+                a_w += aw
+            r2sum += r * r
+            g2sum += gx * gx + gy * gy
+            gxf = fx * gx
+            gyf = fy * gy
+            drpdd = gxf * g0 + gyf * g1
+            wp = 1.0 / (noise2 + s2 * drpdd * drpdd)
+            e2 = r * r * wp
+            ww = wp if e2 < huber2 else wp * huber_half / math.sqrt(e2)
+            err += ww * r * r
+            sxx += ww * gxf * gxf
+            sxy += ww * gxf * gyf
+            syy += ww * gyf * gyf
+            bx += ww * r * gxf
+            by += ww * r * gyf
+        is_good = r2sum < good_den_c + good_g * g2sum
+        if write_flags:
+            flags[ref_idx[i]] = is_good
+        if is_good:
+            good += 1
+        else:
+            bad += 1
+        dc = pz * iz
+        usage += dc if dc < 1.0 else 1.0
+        buf[i, 0] = wx
+        buf[i, 1] = wy
+        buf[i, 2] = wz
+        buf[i, 3] = sxx
+        buf[i, 4] = sxy
+        buf[i, 5] = syy
+        buf[i, 6] = bx
+        buf[i, 7] = by
+        n_in += 1
+    part[blk, 0] = n_in
+    part[blk, 1] = err
+    part[blk, 2] = good
+    part[blk, 3] = bad
+    part[blk, 4] = usage
+    part[blk, 5] = a_xx
+    part[blk, 6] = a_yy
+    part[blk, 7] = a_x
+    part[blk, 8] = a_y
+    part[blk, 9] = a_w
+
+
+@numba.njit(cache=True)
+def _combine_eval(part: np.ndarray) -> tuple[int, float, int, int, float, float, float, float, float, float]:
+    tot = np.zeros(_NE)
+    for blk in range(part.shape[0]):
+        for k in range(_NE):
+            tot[k] += part[blk, k]
+    return (int(tot[0]), tot[1], int(tot[2]), int(tot[3]), tot[4], tot[5], tot[6], tot[7], tot[8], tot[9])
+
+
+@numba.njit(cache=True)
+def eval_pass(
+    points: np.ndarray,
+    ref_vals: np.ndarray,
+    ref_vars: np.ndarray,
+    ref_idx: np.ndarray,
+    packed: np.ndarray,
+    T: np.ndarray,
+    prm: np.ndarray,
+    affine_sums: bool,
+    flags: np.ndarray,
+    write_flags: bool,
+    buf: np.ndarray,
+) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
+    """One residual evaluation of the reference against the frame at pose T (4×4, keyframe→frame).
+
+    Per point p (reference coordinates, float32 (n, 3)): p' = R p + t, (u, v) its projection; kept if
+    1 < u < w−2 and 1 < v < h−2 (otherwise, when ``write_flags``, ``flags[ref_idx] = False``). Bilinear
+    (F_c, gx_c, gy_c) from ``packed`` (h, w, N, 3); r_c = (a·F_ref,c + b) − F_c.
+
+    Good/bad: Σ_c r_c² < N·good_c + good_g·Σ_c |∇F_c|² (LSD-SLAM's r²/(40² + 0.25|∇I|²) < 1 for N=1,
+    averaged over channels). Weights per channel: w_p = 1/(noise2 + var_weight·σ_d²·(g_c·(g0, g1))²), Huber on
+    e = |r_c|√w_p with threshold ``huber_half``; W = w_h·w_p. ``prm`` holds the scalars (see ``P_*``).
+
+    Writes ``buf[i] = (x', y', z', Sxx, Sxy, Syy, sx, sy)`` for every in-image point i and zeros for the
+    others (z' = 0 marks them). Sums are formed per block of :data:`BLOCK` points and combined in order.
+
+    Returns
+    -------
+    (n_in, Σ W r², good, bad, Σ min(1, z/z'), affine sums sxx, syy, sx, sy, sw)
+    """
+    nb = (points.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NE))
+    for blk in range(nb):
+        _eval_block(blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags,
+                    buf, part)  # fmt: skip
+    return _combine_eval(part)
+
+
+@numba.njit(cache=True, parallel=True)
+def eval_pass_parallel(
+    points: np.ndarray,
+    ref_vals: np.ndarray,
+    ref_vars: np.ndarray,
+    ref_idx: np.ndarray,
+    packed: np.ndarray,
+    T: np.ndarray,
+    prm: np.ndarray,
+    affine_sums: bool,
+    flags: np.ndarray,
+    write_flags: bool,
+    buf: np.ndarray,
+) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
+    """:func:`eval_pass` with the blocks distributed over threads (``prange``); bit-identical results."""
+    nb = (points.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NE))
+    for blk in numba.prange(nb):
+        _eval_block(blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags,
+                    buf, part)  # fmt: skip
+    return _combine_eval(part)
+
+
+def eval_pass_numpy(
+    points: np.ndarray,
+    ref_vals: np.ndarray,
+    ref_vars: np.ndarray,
+    ref_idx: np.ndarray,
+    packed: np.ndarray,
+    T: np.ndarray,
+    prm: np.ndarray,
+    affine_sums: bool,
+    flags: np.ndarray,
+    write_flags: bool,
+    buf: np.ndarray,
+) -> tuple[int, float, int, int, float, float, float, float, float, float]:
+    """Vectorised numpy reference of :func:`eval_pass` (same arguments, same outputs up to rounding)."""
+    fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr = (
+        float(x) for x in prm[:N_PARAMS]
+    )
+    nch = ref_vals.shape[1]
+    h, w = packed.shape[:2]
+    P = points.astype(np.float64)
+    T = np.asarray(T, np.float64)
+    X = P @ T[:3, :3].T + T[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        izz = 1.0 / X[:, 2]
+        u = (X[:, 0] * izz) * fx + cx
+        v = (X[:, 1] * izz) * fy + cy
+        inside = (u > 1.0) & (v > 1.0) & (u < w - 2.0) & (v < h - 2.0)
+    if write_flags:
+        flags[ref_idx[~inside]] = False
+    X = X[inside]
+    u = u[inside]
+    v = v[inside]
+    pz = P[inside, 2]
+    ix = u.astype(np.int64)
+    iy = v.astype(np.int64)
+    dx = (u - ix)[:, None, None]
+    dy = (v - iy)[:, None, None]
+    dxdy = dx * dy
+    s = (
+        dxdy * packed[iy + 1, ix + 1]
+        + (dy - dxdy) * packed[iy + 1, ix]
+        + (dx - dxdy) * packed[iy, ix + 1]
+        + (1.0 - dx - dy + dxdy) * packed[iy, ix]
+    )  # (m, N, 3)
+    iv, gx, gy = s[..., 0], s[..., 1], s[..., 2]
+    c1 = aff_a * ref_vals[inside].astype(np.float64) + aff_b
+    r = c1 - iv
+    if affine_sums:
+        ar = np.abs(r)
+        aw = np.where(ar < aff_thr, 1.0, aff_thr / np.maximum(ar, 1e-300))
+        aff = (
+            float(np.sum(c1 * c1 * aw)),
+            float(np.sum(iv * iv * aw)),
+            float(np.sum(c1 * aw)),
+            float(np.sum(iv * aw)),
+            float(np.sum(aw)),
+        )
+    else:
+        aff = (0.0, 0.0, 0.0, 0.0, 0.0)
+    r2sum = np.sum(r * r, axis=1)
+    g2sum = np.sum(gx * gx + gy * gy, axis=1)
+    is_good = r2sum < nch * good_c + good_g * g2sum
+    if write_flags:
+        flags[ref_idx[inside]] = is_good
+    wx, wy, wz = X[:, 0], X[:, 1], X[:, 2]
+    tx, ty, tz = (float(x) for x in T[:3, 3])
+    iz = 1.0 / wz
+    zd = pz * iz * iz
+    g0 = ((tx * wz - tz * wx) * zd)[:, None]
+    g1 = ((ty * wz - tz * wy) * zd)[:, None]
+    gxf = fx * gx
+    gyf = fy * gy
+    drpdd = gxf * g0 + gyf * g1
+    s2 = (var_weight * ref_vars[inside].astype(np.float64))[:, None]
+    wp = 1.0 / (noise2 + s2 * drpdd * drpdd)
+    e2 = r * r * wp
+    ww = np.where(e2 < huber_half * huber_half, wp, wp * huber_half / np.sqrt(np.maximum(e2, 1e-300)))
+    buf[:] = 0.0
+    rows = np.nonzero(inside)[0]
+    buf[rows, 0] = wx
+    buf[rows, 1] = wy
+    buf[rows, 2] = wz
+    buf[rows, 3] = np.sum(ww * gxf * gxf, axis=1)
+    buf[rows, 4] = np.sum(ww * gxf * gyf, axis=1)
+    buf[rows, 5] = np.sum(ww * gyf * gyf, axis=1)
+    buf[rows, 6] = np.sum(ww * r * gxf, axis=1)
+    buf[rows, 7] = np.sum(ww * r * gyf, axis=1)
+    usage = float(np.sum(np.minimum(pz * iz, 1.0)))
+    good = int(is_good.sum())
+    m = len(rows)
+    return (m, float(np.sum(ww * r * r)), good, m - good, usage, *aff)
+
+
+# ============================================================================== normal equations
+_NA = 27  # 21 upper-triangle entries of A and 6 of b
+
+
+@numba.njit(cache=True, inline="always")
+def _warp_block(blk, buf, part):  # pragma: no cover - compiled
+    a00 = a01 = a02 = a03 = a04 = a05 = 0.0
+    a11 = a12 = a13 = a14 = a15 = 0.0
+    a22 = a23 = a24 = a25 = 0.0
+    a33 = a34 = a35 = 0.0
+    a44 = a45 = 0.0
+    a55 = 0.0
+    b0 = b1 = b2 = b3 = b4 = b5 = 0.0
+    i0 = blk * BLOCK
+    i1 = min(buf.shape[0], i0 + BLOCK)
+    for k in range(i0, i1):
+        z = buf[k, 2]
+        if z == 0.0:  # point outside the image
+            continue
+        x = buf[k, 0]
+        y = buf[k, 1]
+        iz = 1.0 / z
+        sxx = buf[k, 3]
+        sxy = buf[k, 4]
+        syy = buf[k, 5]
+        bx = buf[k, 6]
+        by = buf[k, 7]
+        xz = x * iz
+        yz = y * iz
+        # jx = (iz, 0, -xz*iz, -xz*yz, 1 + xz*xz, -yz); jy = (0, iz, -yz*iz, -(1 + yz*yz), xz*yz, xz)
+        jx0 = iz
+        jx2 = -xz * iz
+        jx3 = -xz * yz
+        jx4 = 1.0 + xz * xz
+        jx5 = -yz
+        jy1 = iz
+        jy2 = -yz * iz
+        jy3 = -(1.0 + yz * yz)
+        jy4 = xz * yz
+        jy5 = xz
+        # u = S_xx jx + S_xy jy ; q = S_xy jx + S_yy jy
+        u0 = sxx * jx0
+        u1 = sxy * jy1
+        u2 = sxx * jx2 + sxy * jy2
+        u3 = sxx * jx3 + sxy * jy3
+        u4 = sxx * jx4 + sxy * jy4
+        u5 = sxx * jx5 + sxy * jy5
+        q1 = syy * jy1
+        q2 = sxy * jx2 + syy * jy2
+        q3 = sxy * jx3 + syy * jy3
+        q4 = sxy * jx4 + syy * jy4
+        q5 = sxy * jx5 + syy * jy5
+        a00 += jx0 * u0
+        a01 += jx0 * u1
+        a02 += jx0 * u2
+        a03 += jx0 * u3
+        a04 += jx0 * u4
+        a05 += jx0 * u5
+        a11 += jy1 * q1
+        a12 += jy1 * q2
+        a13 += jy1 * q3
+        a14 += jy1 * q4
+        a15 += jy1 * q5
+        a22 += jx2 * u2 + jy2 * q2
+        a23 += jx2 * u3 + jy2 * q3
+        a24 += jx2 * u4 + jy2 * q4
+        a25 += jx2 * u5 + jy2 * q5
+        a33 += jx3 * u3 + jy3 * q3
+        a34 += jx3 * u4 + jy3 * q4
+        a35 += jx3 * u5 + jy3 * q5
+        a44 += jx4 * u4 + jy4 * q4
+        a45 += jx4 * u5 + jy4 * q5
+        a55 += jx5 * u5 + jy5 * q5
+        b0 += jx0 * bx
+        b1 += jy1 * by
+        b2 += jx2 * bx + jy2 * by
+        b3 += jx3 * bx + jy3 * by
+        b4 += jx4 * bx + jy4 * by
+        b5 += jx5 * bx + jy5 * by
+    p = part[blk]
+    p[0] = a00
+    p[1] = a01
+    p[2] = a02
+    p[3] = a03
+    p[4] = a04
+    p[5] = a05
+    p[6] = a11
+    p[7] = a12
+    p[8] = a13
+    p[9] = a14
+    p[10] = a15
+    p[11] = a22
+    p[12] = a23
+    p[13] = a24
+    p[14] = a25
+    p[15] = a33
+    p[16] = a34
+    p[17] = a35
+    p[18] = a44
+    p[19] = a45
+    p[20] = a55
+    p[21] = b0
+    p[22] = b1
+    p[23] = b2
+    p[24] = b3
+    p[25] = b4
+    p[26] = b5
+
+
+@numba.njit(cache=True)
+def _combine_warp(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    tot = np.zeros(_NA)
+    for blk in range(part.shape[0]):
+        for k in range(_NA):
+            tot[k] += part[blk, k]
+    A = np.empty((6, 6))
+    k = 0
+    for i in range(6):
+        for j in range(i, 6):
+            A[i, j] = tot[k]
+            A[j, i] = tot[k]
+            k += 1
+    return A, tot[21:27].copy()
+
+
+@numba.njit(cache=True)
+def warp_update(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """Accumulate A = Σ Mᵀ S M (6×6) and b = Σ Mᵀ s (6) over the in-image rows (z' ≠ 0) of ``buf``.
+
+    M (2×6) is the derivative of the projection (in units where g already holds fx, fy) w.r.t. a left
+    perturbation (υ, ω) of the point p' = (x, y, z):
+    row x = (1/z, 0, −x/z², −xy/z², 1 + x²/z², −y/z), row y = (0, 1/z, −y/z², −(1 + y²/z²), xy/z², x/z),
+    so A_ij += jx_i·(S j)_x,j + jy_i·(S j)_y,j (written out with scalar accumulators, upper triangle).
+    Blocked like :func:`eval_pass`. Not divided by the number of points.
+    """
+    nb = (buf.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NA))
+    for blk in range(nb):
+        _warp_block(blk, buf, part)
+    return _combine_warp(part)
+
+
+@numba.njit(cache=True, parallel=True)
+def warp_update_parallel(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """:func:`warp_update` with the blocks distributed over threads; bit-identical results."""
+    nb = (buf.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NA))
+    for blk in numba.prange(nb):
+        _warp_block(blk, buf, part)
+    return _combine_warp(part)
+
+
+def warp_update_numpy(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`warp_update`: builds the per-point 2×6 M explicitly."""
+    B = buf[buf[:, 2] != 0.0]
+    x, y, z = B[:, 0], B[:, 1], B[:, 2]
+    iz = 1.0 / z
+    iz2 = iz * iz
+    zero = np.zeros_like(x)
+    jx = np.stack([iz, zero, -x * iz2, -x * y * iz2, 1.0 + x * x * iz2, -y * iz], axis=1)
+    jy = np.stack([zero, iz, -y * iz2, -(1.0 + y * y * iz2), x * y * iz2, x * iz], axis=1)
+    M = np.stack([jx, jy], axis=1)  # (n, 2, 6)
+    S = np.empty((len(B), 2, 2))
+    S[:, 0, 0] = B[:, 3]
+    S[:, 0, 1] = S[:, 1, 0] = B[:, 4]
+    S[:, 1, 1] = B[:, 5]
+    A = np.einsum("nki,nkl,nlj->ij", M, S, M)
+    b = np.einsum("nki,nk->i", M, B[:, 6:8])
+    return A, b
+
+
+# ============================================================================== small linear algebra
+@numba.njit(cache=True)
+def solve_damped(A: np.ndarray, b: np.ndarray, lam: float) -> tuple[np.ndarray, bool]:  # pragma: no cover
+    """Solve (A with its diagonal multiplied by 1+λ) x = b by an LDLᵀ factorisation (6×6, no pivoting).
+
+    Returns (x, ok); ok is False (and x zero) when a pivot is not positive and finite.
+    """
+    n = A.shape[0]
+    M = A.copy()
+    for i in range(n):
+        M[i, i] *= 1.0 + lam
+    L = np.eye(n)
+    D = np.zeros(n)
+    x = np.zeros(n)
+    for j in range(n):
+        dj = M[j, j]
+        for k in range(j):
+            dj -= L[j, k] * L[j, k] * D[k]
+        if not (dj > 0.0) or not math.isfinite(dj):
+            return x, False
+        D[j] = dj
+        for i in range(j + 1, n):
+            s = M[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k] * D[k]
+            L[i, j] = s / dj
+    y = np.zeros(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s
+    for i in range(n):
+        y[i] /= D[i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s
+    return x, True
+
+
+@numba.njit(cache=True)
+def se3_exp(xi: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """exp of a twist (υ, ω) (translation first) as a 4×4 float64 matrix (Sophus convention)."""
+    wx = xi[3]
+    wy = xi[4]
+    wz = xi[5]
+    th2 = wx * wx + wy * wy + wz * wz
+    if th2 < 1e-10:
+        a = 1.0 - th2 / 6.0
+        bb = 0.5 - th2 / 24.0
+        cc = 1.0 / 6.0 - th2 / 120.0
+    else:
+        th = math.sqrt(th2)
+        a = math.sin(th) / th
+        bb = (1.0 - math.cos(th)) / th2
+        cc = (th - math.sin(th)) / (th2 * th)
+    W = np.zeros((3, 3))
+    W[0, 1] = -wz
+    W[0, 2] = wy
+    W[1, 0] = wz
+    W[1, 2] = -wx
+    W[2, 0] = -wy
+    W[2, 1] = wx
+    W2 = W @ W
+    T = np.eye(4)
+    for i in range(3):
+        for j in range(3):
+            e = 1.0 if i == j else 0.0
+            T[i, j] = e + a * W[i, j] + bb * W2[i, j]
+    for i in range(3):
+        s = 0.0
+        for j in range(3):
+            e = 1.0 if i == j else 0.0
+            s += (e + bb * W[i, j] + cc * W2[i, j]) * xi[j]
+        T[i, 3] = s
+    return T

@@ -1,0 +1,309 @@
+"""Configuration of the semi-dense visual odometry (frozen dataclasses).
+
+Every default is the LSD-SLAM value that users effectively ran (the ROS dynamic-reconfigure defaults, see
+``lsd-slam-spec.md`` §0). Thresholds tied to the 0..255 intensity range are kept as in LSD-SLAM; features are
+expected to be scaled so that their gradients are comparable to grey-level gradients.
+
+Use :meth:`VOConfig.from_dict`, :meth:`VOConfig.from_yaml` and :meth:`VOConfig.with_overrides` to build
+non-default configurations, e.g.
+``VOConfig().with_overrides("tracker.huber_d=2", "keyframe.kf_dist_weight=4")``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from dmtrack.errors import InputError
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """SE(3) coarse-to-fine Levenberg–Marquardt tracker (LSD-SLAM ``SE3Tracker``), lsd-slam-spec.md §2."""
+
+    levels: tuple[int, ...] = (4, 3, 2, 1)
+    """Pyramid levels visited, coarse to fine (``SE3TRACKING_MAX_LEVEL``-1 … ``SE3TRACKING_MIN_LEVEL``)."""
+    max_its: tuple[int, ...] = (5, 20, 50, 100, 100)
+    """LM iterations per level, indexed by level (LSD-SLAM ``maxItsPerLvl`` = {5, 20, 50, 100, 100}; level 0
+    is not tracked). Note: lsd-slam-spec.md §2 says level 4 only evaluates (0 iterations); LSD-SLAM's code
+    (``SE3Tracker::trackFrame``, ``DenseDepthTrackerSettings``) gives it 100. ``(5, 20, 50, 100, 0)`` gives
+    the spec's schedule."""
+    lambda_initial: float = 0.0
+    """Initial LM damping (``lambdaInitial``)."""
+    step_size_min: float = 1e-8
+    """Stop a level when a rejected step has δ·δ ≤ this (``stepSizeMin``)."""
+    convergence_eps: float = 0.999
+    """Stop a level when an accepted step has E_new/E_last > this (``convergenceEps``)."""
+    lambda_success_fac: float = 0.5
+    """λ ← λ·fac after an accepted step when λ > 0.2 (``lambdaSuccessFac``)."""
+    lambda_fail_fac: float = 2.0
+    """λ ← λ·fac^(tries) after a rejected step (``lambdaFailFac``)."""
+    var_weight: float = 1.0
+    """Weight of the depth variance in the residual weight (``var_weight``)."""
+    huber_d: float = 3.0
+    """Huber threshold: e = |r|·√w_p, w_h = 1 if e < huber_d/2 else (huber_d/2)/e (``huber_d``)."""
+    camera_pixel_noise2: float = 16.0
+    """Photometric noise variance in grey levels² (``cameraPixelNoise2``)."""
+    affine: bool = False
+    """Estimate affine brightness a·I_ref + b (Gray-A, ``useAffineLightningEstimation``); grey (N=1) only."""
+    affine_compose: bool = False
+    """Gray-A update rule. False (LSD-SLAM's code): the new (a, b) *replace* the old ones although they were
+    estimated against a·I_ref + b, so the estimate alternates. True: compose (a, b) ← (a'·a, a'·b + b')."""
+    affine_huber: float = 5.0
+    """Weight threshold of the affine estimation: w = 1 if |r| < 5 else 5/|r|."""
+    good_residual: float = 40.0
+    """Good/bad test: r²/(good_residual² + good_grad_weight²·|∇I|²) < 1 is good."""
+    good_grad_weight: float = 0.5
+    """Gradient factor of the good/bad test (0.5 in LSD-SLAM)."""
+    min_good_per_pixel: float = 0.04
+    """Tracking good only if good/((w/2)(h/2)) > this."""
+    min_good_ratio: float = 0.5
+    """Tracking good only if good/(good+bad) > this."""
+    min_inlier_fraction: float = 0.01
+    """Diverged if in-image points < fraction·(w>>l)(h>>l) at a level."""
+    channel_weight: Literal["sum", "mean"] = "sum"
+    """Channel reduction of the cost: "sum" (squared L2 over channels, the paper) or "mean" (÷N)."""
+
+    def __post_init__(self) -> None:
+        if not self.levels:
+            raise InputError("tracker.levels must not be empty")
+        if list(self.levels) != sorted(set(self.levels), reverse=True):
+            raise InputError(f"tracker.levels {self.levels} must be strictly decreasing (coarse to fine)")
+        if any(lv < 0 or lv >= len(self.max_its) for lv in self.levels):
+            raise InputError(f"tracker.levels {self.levels} outside 0..{len(self.max_its) - 1}")
+        if self.channel_weight not in ("sum", "mean"):
+            raise InputError(f"tracker.channel_weight must be 'sum' or 'mean', not {self.channel_weight!r}")
+        if self.huber_d <= 0 or self.camera_pixel_noise2 <= 0:
+            raise InputError("tracker.huber_d and tracker.camera_pixel_noise2 must be positive")
+
+
+@dataclass(frozen=True)
+class DepthConfig:
+    """Semi-dense inverse-depth map on the keyframe (LSD-SLAM ``DepthMap``), lsd-slam-spec.md §3."""
+
+    min_use_grad: float = 5.0
+    """``minUseGrad``: mapping gradient gate; also ``MIN_ABS_GRAD_CREATE`` and ``MIN_ABS_GRAD_DECREASE``."""
+    camera_pixel_noise2: float = 16.0
+    """``cameraPixelNoise2``: photometric noise variance used in the stereo variance."""
+    max_var: float = 0.5 * 0.5
+    """``MAX_VAR``: hypotheses with larger inverse-depth variance are invalid."""
+    var_random_init_initial: float = 0.125
+    """``VAR_RANDOM_INIT_INITIAL``: variance of random init and hole filling."""
+    random_init_validity: float = 20.0
+    """Validity counter given by the random initialisation (LSD-SLAM uses 20)."""
+    succ_var_inc_fac: float = 1.01
+    """``SUCC_VAR_INC_FAC``: prediction variance inflation before an EKF update."""
+    fail_var_inc_fac: float = 1.1
+    """``FAIL_VAR_INC_FAC``: variance inflation after a failed/inconsistent observation."""
+    validity_counter_inc: float = 5.0
+    """``VALIDITY_COUNTER_INC``."""
+    validity_counter_dec: float = 5.0
+    """``VALIDITY_COUNTER_DEC``."""
+    validity_counter_initial_observe: float = 5.0
+    """``VALIDITY_COUNTER_INITIAL_OBSERVE``."""
+    validity_counter_max: float = 5.0
+    """``VALIDITY_COUNTER_MAX``."""
+    validity_counter_max_variable: float = 250.0
+    """``VALIDITY_COUNTER_MAX_VARIABLE``: cap is max + maxGrad·this/255."""
+    val_sum_min_for_create: float = 30.0
+    """``VAL_SUM_MIN_FOR_CREATE``: hole filling needs a 5×5 validity sum above this."""
+    val_sum_min_for_keep: float = 24.0
+    """``VAL_SUM_MIN_FOR_KEEP``: regularisation drops pixels whose neighbourhood validity sum is lower."""
+    val_sum_min_for_unblacklist: float = 100.0
+    """``VAL_SUM_MIN_FOR_UNBLACKLIST``: hole filling of a blacklisted pixel needs a sum above this."""
+    min_blacklist: int = -1
+    """``MIN_BLACKLIST``: pixels with blacklisted < this are skipped."""
+    min_depth: float = 0.05
+    """``MIN_DEPTH``."""
+    max_epl_length_crop: float = 30.0
+    """``MAX_EPL_LENGTH_CROP`` (pixels)."""
+    min_epl_length_crop: float = 3.0
+    """``MIN_EPL_LENGTH_CROP`` (pixels)."""
+    sample_point_to_border: float = 7.0
+    """``SAMPLE_POINT_TO_BORDER`` (pixels)."""
+    max_error_stereo: float = 1300.0
+    """``MAX_ERROR_STEREO``: SSD threshold of the 5-sample line stereo."""
+    min_distance_error_stereo: float = 1.5
+    """``MIN_DISTANCE_ERROR_STEREO``: best·this must not exceed a non-adjacent second best."""
+    stereo_epl_var_fac: float = 2.0
+    """``STEREO_EPL_VAR_FAC``: search interval is ±this·σ."""
+    min_epl_grad_squared: float = 2.0 * 2.0
+    """``MIN_EPL_GRAD_SQUARED``."""
+    min_epl_length_squared: float = 1.0
+    """``MIN_EPL_LENGTH_SQUARED``."""
+    min_epl_angle_squared: float = 0.3 * 0.3
+    """``MIN_EPL_ANGLE_SQUARED``."""
+    reg_dist_var: float = 0.075 * 0.075
+    """``REG_DIST_VAR``: regularisation distance weight."""
+    depth_smoothing_factor: float = 1.0
+    """``depthSmoothingFactor``."""
+    allow_negative_idepths: bool = True
+    """``allowNegativeIdepths``."""
+    use_subpixel_stereo: bool = True
+    """``useSubpixelStereo``."""
+    min_tracking_idepth: float = -0.05
+    """Hypotheses with idepth_smoothed below this are not used for tracking."""
+    ssd_reduction: Literal["sum", "mean"] = "sum"
+    """How SSD-type costs reduce over channels: "sum" (squared L2) or "mean" (divided by N)."""
+
+    def __post_init__(self) -> None:
+        if self.ssd_reduction not in ("sum", "mean"):
+            raise InputError(f"depth.ssd_reduction must be 'sum' or 'mean', not {self.ssd_reduction!r}")
+
+
+@dataclass(frozen=True)
+class KeyframeConfig:
+    """Keyframe selection (LSD-SLAM ``SlamSystem`` new-keyframe test), lsd-slam-spec.md §3 "New keyframe"."""
+
+    kf_dist_weight: float = 3.0
+    """``KFDistWeight`` (ROS default 3)."""
+    kf_usage_weight: float = 4.0
+    """``KFUsageWeight`` (ROS default 4)."""
+    threshold: float = 0.14
+    """New keyframe when (|t|·meanIdepth)²·dist_w² + (1 − usage)²·usage_w² exceeds this."""
+    min_mapped: int = 5
+    """The current keyframe must have been mapped more than this many times (``MIN_NUM_MAPPED`` 5)."""
+    loss_not_good_after: int | None = 5
+    """Once more than this many keyframes exist, a frame whose tracking is not good (besides diverged) counts
+    as lost (LSD-SLAM ``INITIALIZATION_PHASE_COUNT`` 5). ``None``: only divergence counts, which is what
+    LSD-SLAM does in pure VO mode, where its keyframe graph stays empty (lsd-slam-spec.md §6)."""
+
+
+@dataclass(frozen=True)
+class VOConfig:
+    """Whole odometry configuration."""
+
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    depth: DepthConfig = field(default_factory=DepthConfig)
+    keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
+    pyramid_levels: int = 5
+    """Number of pyramid levels built per frame (0..pyramid_levels−1)."""
+    seed: int = 0
+    """Seed of the random depth initialisation."""
+    stop_on_loss: bool = True
+    """Stop processing at the first tracking loss (the paper counts tracked frames until failure)."""
+
+    def __post_init__(self) -> None:
+        if self.pyramid_levels < 1:
+            raise InputError("pyramid_levels must be ≥ 1")
+        if max(self.tracker.levels) >= self.pyramid_levels:
+            raise InputError(f"tracker.levels {self.tracker.levels} need > {self.pyramid_levels} levels")
+
+    # ------------------------------------------------------------------ construction helpers
+    def to_dict(self) -> dict[str, Any]:
+        """Nested plain dict (tuples stay tuples)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], path: str | Path | None = None) -> VOConfig:
+        """Build from a nested dict; unknown keys raise :class:`InputError` (naming ``path`` if given)."""
+        if not isinstance(data, dict):
+            raise InputError("configuration must be a mapping", path=path)
+        sub_types = {"tracker": TrackerConfig, "depth": DepthConfig, "keyframe": KeyframeConfig}
+        kwargs: dict[str, Any] = {}
+        top_fields = {f.name for f in dataclasses.fields(cls)}
+        for key, value in data.items():
+            if key not in top_fields:
+                raise InputError(f"unknown configuration key {key!r}", path=path)
+            if key in sub_types:
+                if isinstance(value, sub_types[key]):
+                    kwargs[key] = value
+                    continue
+                if not isinstance(value, dict):
+                    raise InputError(f"configuration section {key!r} must be a mapping", path=path)
+                kwargs[key] = _build(sub_types[key], value, key, path)
+            else:
+                kwargs[key] = _coerce(cls, key, value, key, path)
+        try:
+            return cls(**kwargs)
+        except InputError as exc:
+            raise InputError(exc.reason, path=path) from None
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> VOConfig:
+        """Read a YAML file with optional sections ``tracker``, ``depth``, ``keyframe`` and top-level keys."""
+        import yaml
+
+        p = Path(path)
+        try:
+            text = p.read_text()
+        except OSError as exc:
+            raise InputError(f"cannot read configuration: {exc.strerror}", path=p) from None
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            line = None
+            mark = getattr(exc, "problem_mark", None)
+            if mark is not None:
+                line = mark.line + 1
+            raise InputError(f"invalid YAML: {exc}", path=p, line=line) from None
+        return cls.from_dict(data or {}, path=p)
+
+    def with_overrides(self, *overrides: str) -> VOConfig:
+        """Return a copy with ``"section.key=value"`` (or ``"key=value"``) overrides applied.
+
+        Values are parsed as YAML scalars/sequences (``"tracker.levels=[3,2,1]"``, ``"tracker.affine=true"``).
+        """
+        import yaml
+
+        data = self.to_dict()
+        for item in overrides:
+            if "=" not in item:
+                raise InputError(f"override {item!r} is not of the form key=value")
+            key, raw = item.split("=", 1)
+            parts = key.strip().split(".")
+            try:
+                value = yaml.safe_load(raw)
+            except yaml.YAMLError:
+                raise InputError(f"override {item!r}: cannot parse value") from None
+            node = data
+            for part in parts[:-1]:
+                if part not in node or not isinstance(node[part], dict):
+                    raise InputError(f"override {item!r}: unknown section {part!r}")
+                node = node[part]
+            if parts[-1] not in node:
+                raise InputError(f"override {item!r}: unknown key {parts[-1]!r}")
+            node[parts[-1]] = value
+        return VOConfig.from_dict(data)
+
+
+def _coerce(cls: type, name: str, value: Any, where: str, path: str | Path | None) -> Any:
+    """Coerce ``value`` to the type of field ``name`` of ``cls`` (lists → tuples, ints → floats)."""
+    fld = {f.name: f for f in dataclasses.fields(cls)}[name]
+    default = fld.default
+    if default is dataclasses.MISSING:
+        return value
+    if value is None and "None" in str(fld.type):
+        return None
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise InputError(f"{where} must be true/false, not {value!r}", path=path)
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise InputError(f"{where} must be an integer, not {value!r}", path=path)
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{where} must be a number, not {value!r}", path=path)
+        return float(value)
+    if isinstance(default, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise InputError(f"{where} must be a list, not {value!r}", path=path)
+        return tuple(value)
+    return value
+
+
+def _build(cls: type, data: dict[str, Any], section: str, path: str | Path | None) -> Any:
+    names = {f.name for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for key, value in data.items():
+        if key not in names:
+            raise InputError(f"unknown configuration key {section}.{key}", path=path)
+        kwargs[key] = _coerce(cls, key, value, f"{section}.{key}", path)
+    try:
+        return cls(**kwargs)
+    except InputError as exc:
+        raise InputError(exc.reason, path=path) from None

@@ -1,0 +1,331 @@
+"""Frames and their feature pyramids (lsd-slam-spec.md §1, generalised to N channels, §4.1–4.2).
+
+A :class:`Frame` holds the source image (for point-cloud colours) and a pyramid of :class:`Level` s.
+Level 0 is the feature map itself; level l+1 is the per-channel 2×2 box mean of level l (the "down-sample
+the feature map" pyramid policy). Per level and channel the gradients are halved central differences, zero
+on the one-pixel border; ``max_grad`` is the 3×3 max filter of the channel-mean gradient magnitude (zero on
+the border).
+
+Two implementations of the per-level computations exist: a plain numpy reference (``*_numpy``) and numba
+kernels (used by :func:`build_frame`); ``tests/odometry/test_frame.py`` checks that they agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numba
+import numpy as np
+
+from dmtrack.errors import InputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from dmtrack.geometry.camera import PinholeCamera
+
+
+class Level:
+    """One pyramid level of a frame.
+
+    The gradients and ``max_grad`` are computed on first access (tracking never reads level 0's, mapping
+    only the keyframe's), with the numba kernels or the numpy reference as chosen in :func:`build_frame`.
+
+    Attributes
+    ----------
+    feat : np.ndarray
+        (h, w, N) float32, C-contiguous feature values (grey: N=1, 0..255).
+    gx, gy : np.ndarray
+        (h, w, N) float32 halved central differences ½(F[x+1]−F[x−1]) (resp. along y); 0 on the 1-pixel
+        border.
+    max_grad : np.ndarray
+        (h, w) float32: 3×3 max filter of mean_c sqrt(gx_c² + gy_c²); 0 on the 1-pixel border.
+    camera : PinholeCamera
+        Intrinsics of this level (``camera.level(l)``).
+    packed : np.ndarray
+        (h, w, N, 3) float32 (F, gx, gy) per pixel and channel (built on first use).
+    """
+
+    def __init__(
+        self,
+        feat: np.ndarray,
+        camera: Any,
+        gx: np.ndarray | None = None,
+        gy: np.ndarray | None = None,
+        max_grad: np.ndarray | None = None,
+        use_numba: bool = True,
+    ):
+        self.feat = feat
+        self.camera = camera
+        self._gx = gx
+        self._gy = gy
+        self._max_grad = max_grad
+        self._use_numba = use_numba
+        self._packed: np.ndarray | None = None
+
+    def _ensure_gradients(self) -> None:
+        if self._gx is None or self._gy is None or self._max_grad is None:
+            fn = gradients if self._use_numba else gradients_numpy
+            self._gx, self._gy, self._max_grad = fn(self.feat)
+
+    @property
+    def gx(self) -> np.ndarray:
+        """(h, w, N) float32 x-gradient."""
+        self._ensure_gradients()
+        assert self._gx is not None
+        return self._gx
+
+    @property
+    def gy(self) -> np.ndarray:
+        """(h, w, N) float32 y-gradient."""
+        self._ensure_gradients()
+        assert self._gy is not None
+        return self._gy
+
+    @property
+    def max_grad(self) -> np.ndarray:
+        """(h, w) float32 3×3 max of the channel-mean gradient magnitude."""
+        self._ensure_gradients()
+        assert self._max_grad is not None
+        return self._max_grad
+
+    @property
+    def height(self) -> int:
+        """Rows h of this level."""
+        return int(self.feat.shape[0])
+
+    @property
+    def width(self) -> int:
+        """Columns w of this level."""
+        return int(self.feat.shape[1])
+
+    @property
+    def packed(self) -> np.ndarray:
+        """(h, w, N, 3) float32 array of (F, gx, gy) per pixel and channel, built on first use and cached.
+
+        The tracker samples it bilinearly: one contiguous read of 3N floats per corner.
+        """
+        if self._packed is None:
+            self._packed = np.ascontiguousarray(np.stack([self.feat, self.gx, self.gy], axis=-1))
+        return self._packed
+
+    def __repr__(self) -> str:
+        return f"Level({self.width}x{self.height}x{self.feat.shape[2]})"
+
+
+@dataclass
+class Frame:
+    """A frame: index, timestamp, source image and feature pyramid.
+
+    Attributes
+    ----------
+    index : int
+        Frame index in the sequence.
+    timestamp : float
+        Timestamp (seconds or dataset units).
+    image : np.ndarray
+        The source uint8 image, (H, W) grey or (H, W, 3) RGB, used for point-cloud colours.
+    levels : list[Level]
+        Pyramid, level 0 full resolution.
+    """
+
+    index: int
+    timestamp: float
+    image: np.ndarray
+    levels: list[Level]
+
+    @property
+    def camera(self) -> PinholeCamera:
+        """Level-0 intrinsics."""
+        return self.levels[0].camera
+
+    @property
+    def n_channels(self) -> int:
+        """Number of feature channels N."""
+        return int(self.levels[0].feat.shape[2])
+
+    @property
+    def height(self) -> int:
+        """Level-0 rows H."""
+        return self.levels[0].height
+
+    @property
+    def width(self) -> int:
+        """Level-0 columns W."""
+        return self.levels[0].width
+
+
+# ------------------------------------------------------------------------------------------ numpy reference
+def downsample_numpy(feat: np.ndarray) -> np.ndarray:
+    """2×2 box mean per channel: (h, w, N) → (h//2, w//2, N) float32 (h, w even). Reference implementation."""
+    f = feat.astype(np.float32)
+    s = (f[0::2, 0::2] + f[0::2, 1::2]) + (f[1::2, 0::2] + f[1::2, 1::2])
+    return (s * np.float32(0.25)).astype(np.float32)
+
+
+def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gradients and max-gradient of one level. Reference implementation.
+
+    Parameters
+    ----------
+    feat : (h, w, N) float32
+
+    Returns
+    -------
+    gx, gy : (h, w, N) float32
+        ½(F[x+1]−F[x−1]), ½(F[y+1]−F[y−1]) at interior pixels, 0 on the 1-pixel border.
+    max_grad : (h, w) float32
+        3×3 max filter of mean_c sqrt(gx_c²+gy_c²) at interior pixels (border magnitudes are 0); 0 on the
+        border.
+    """
+    f = feat.astype(np.float32)
+    h, w, n = f.shape
+    gx = np.zeros_like(f)
+    gy = np.zeros_like(f)
+    half = np.float32(0.5)
+    gx[1:-1, 1:-1] = half * (f[1:-1, 2:] - f[1:-1, :-2])
+    gy[1:-1, 1:-1] = half * (f[2:, 1:-1] - f[:-2, 1:-1])
+    mag = np.sqrt(gx * gx + gy * gy).astype(np.float32)
+    # channel mean, summed in channel order then divided (same order as the kernel)
+    msum = np.zeros((h, w), np.float32)
+    for c in range(n):
+        msum += mag[:, :, c]
+    gmean = (msum / np.float32(n)).astype(np.float32)
+    mg = np.zeros((h, w), np.float32)
+    if h >= 3 and w >= 3:
+        win = np.lib.stride_tricks.sliding_window_view(gmean, (3, 3))
+        mg[1:-1, 1:-1] = win.max(axis=(2, 3))
+    return gx, gy, mg
+
+
+# ------------------------------------------------------------------------------------------ numba kernels
+@numba.njit(cache=True)
+def _downsample_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    h2, w2, n = out.shape
+    for y in range(h2):
+        for x in range(w2):
+            for c in range(n):
+                s = (feat[2 * y, 2 * x, c] + feat[2 * y, 2 * x + 1, c]) + (
+                    feat[2 * y + 1, 2 * x, c] + feat[2 * y + 1, 2 * x + 1, c]
+                )
+                out[y, x, c] = s * np.float32(0.25)
+
+
+@numba.njit(cache=True)
+def _gradients_kernel(
+    feat: np.ndarray, gx: np.ndarray, gy: np.ndarray, gmean: np.ndarray, max_grad: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    h, w, n = feat.shape
+    half = np.float32(0.5)
+    inv_n = np.float32(n)
+    gx[:] = 0
+    gy[:] = 0
+    gmean[:] = 0
+    max_grad[:] = 0
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            s = np.float32(0.0)
+            for c in range(n):
+                dx = half * (feat[y, x + 1, c] - feat[y, x - 1, c])
+                dy = half * (feat[y + 1, x, c] - feat[y - 1, x, c])
+                gx[y, x, c] = dx
+                gy[y, x, c] = dy
+                s += np.sqrt(dx * dx + dy * dy)
+            gmean[y, x] = s / inv_n
+    for y in range(1, h - 1):
+        for x in range(1, w - 1):
+            m = gmean[y - 1, x - 1]
+            for yy in range(y - 1, y + 2):
+                for xx in range(x - 1, x + 2):
+                    v = gmean[yy, xx]
+                    if v > m:
+                        m = v
+            max_grad[y, x] = m
+
+
+def downsample(feat: np.ndarray) -> np.ndarray:
+    """2×2 box mean per channel (numba): (h, w, N) float32 → (h//2, w//2, N) float32."""
+    h, w, n = feat.shape
+    out = np.empty((h // 2, w // 2, n), np.float32)
+    _downsample_kernel(np.ascontiguousarray(feat, dtype=np.float32), out)
+    return out
+
+
+def gradients(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gradients and max-gradient of one level (numba); same definition as :func:`gradients_numpy`."""
+    f = np.ascontiguousarray(feat, dtype=np.float32)
+    h, w, n = f.shape
+    gx = np.empty_like(f)
+    gy = np.empty_like(f)
+    gmean = np.empty((h, w), np.float32)
+    mg = np.empty((h, w), np.float32)
+    _gradients_kernel(f, gx, gy, gmean, mg)
+    return gx, gy, mg
+
+
+def build_frame(
+    index: int,
+    timestamp: float,
+    image: np.ndarray,
+    feature_map: np.ndarray | list[np.ndarray],
+    camera: PinholeCamera,
+    n_levels: int = 5,
+    use_numba: bool = True,
+) -> Frame:
+    """Build a :class:`Frame` with an ``n_levels`` pyramid.
+
+    Parameters
+    ----------
+    index, timestamp
+        Frame index and timestamp.
+    image : np.ndarray
+        Source uint8 image (H, W) or (H, W, 3), kept for colours.
+    feature_map : np.ndarray or list of np.ndarray
+        (H, W, N) (or (H, W) for N=1) feature map; converted to float32 C-contiguous. Level l+1 is the 2×2 box
+        mean of level l (the "downsample" pyramid policy). A list gives every level's map instead (the
+        "recompute" policy, e.g. Bit-Planes computed on each level's image): ``n_levels`` maps of shape
+        (H >> l, W >> l, N).
+    camera : PinholeCamera
+        Level-0 intrinsics; its width/height must equal W/H.
+    n_levels : int
+        Pyramid levels; H and W must be divisible by 2^(n_levels−1).
+    use_numba : bool
+        Use the numba kernels (default) or the numpy reference (also for the lazily computed gradients).
+
+    Raises
+    ------
+    InputError
+        If the feature map has the wrong shape or does not fit the camera.
+    """
+    given: list[np.ndarray] | None = None
+    if isinstance(feature_map, (list, tuple)):
+        given = [np.asarray(f) for f in feature_map]
+        given = [f[:, :, None] if f.ndim == 2 else f for f in given]
+        if len(given) != n_levels:
+            raise InputError(f"{len(given)} feature maps given for a {n_levels}-level pyramid")
+        for lv, f in enumerate(given):
+            expected = (given[0].shape[0] >> lv, given[0].shape[1] >> lv, given[0].shape[2])
+            if f.shape != expected:
+                raise InputError(f"pyramid level {lv} feature map has shape {f.shape}, expected {expected}")
+        feature_map = given[0]
+    fm = np.asarray(feature_map)
+    if fm.ndim == 2:
+        fm = fm[:, :, None]
+    if fm.ndim != 3 or fm.shape[2] < 1:
+        raise InputError(f"feature map must be (H, W, N), got shape {fm.shape}")
+    h, w, _ = fm.shape
+    if n_levels < 1:
+        raise InputError("n_levels must be ≥ 1")
+    div = 1 << (n_levels - 1)
+    if h % div or w % div:
+        raise InputError(f"feature map {w}x{h} is not divisible by {div} (needed for {n_levels} levels)")
+    cw, ch = int(camera.width), int(camera.height)
+    if (cw, ch) != (w, h):
+        raise InputError(f"feature map is {w}x{h} but the camera is {cw}x{ch}")
+    feat = np.ascontiguousarray(fm, dtype=np.float32)
+    down_fn = downsample if use_numba else downsample_numpy
+    levels: list[Level] = []
+    for lv in range(n_levels):
+        if lv > 0:
+            feat = down_fn(feat) if given is None else np.ascontiguousarray(given[lv], dtype=np.float32)
+        levels.append(Level(feat, camera.level(lv), use_numba=use_numba))
+    return Frame(index=int(index), timestamp=float(timestamp), image=image, levels=levels)

@@ -1,0 +1,184 @@
+"""Output sinks of the visual odometry: where poses, keyframes and tracking losses go.
+
+:class:`~dmtrack.odometry.vo.VisualOdometry` calls an :class:`OutputSink` (any object with these four
+methods; file, PLY and depth-image writers live elsewhere):
+
+* ``on_frame`` once per tracked frame, in frame order, with the camera-to-world pose T_wc (SE(3), world units);
+* ``on_keyframe`` once per keyframe, when its depth map is final — i.e. when the next keyframe replaces it, and
+  for the last keyframe when the odometry finishes — with a :class:`KeyframeSnapshot` (copied arrays);
+* ``on_lost`` when tracking of a frame is lost (diverged, or not good after the first keyframes);
+* ``close`` once at the end.
+
+Also here: :class:`MemorySink` (records everything; handy in tests and notebooks) and :class:`MultiSink`
+(fans out to several sinks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class KeyframeSnapshot:
+    """A keyframe's final semi-dense depth, copied out of the depth map.
+
+    Attributes
+    ----------
+    keyframe_id : int
+        0, 1, 2, … in creation order.
+    frame_index, timestamp
+        The frame that became this keyframe.
+    T_wc : np.ndarray
+        (4, 4) float64 SE(3) camera-to-world pose of the keyframe (world units).
+    scale : float
+        Sim(3) scale s of the keyframe: a point X_k in keyframe units (depth = 1/idepth) lies at
+        s·R·X_k + t in the world (R, t from ``T_wc``). Keyframe maps are normalised to mean inverse depth 1.
+    idepth, idepth_var : np.ndarray
+        (H, W) float32 smoothed inverse depth (keyframe units) and its variance; −1 (both) where there is no
+        usable hypothesis (invalid, or idepth < −0.05). Negative inverse depths above −0.05 are kept.
+    image : np.ndarray | None
+        The keyframe's source uint8 image ((H, W) grey or (H, W, 3) RGB) for colours.
+    camera : Any
+        The level-0 :class:`~dmtrack.geometry.camera.PinholeCamera`.
+    n_updates : int
+        Frames that were mapped into this keyframe.
+    """
+
+    keyframe_id: int
+    frame_index: int
+    timestamp: float
+    T_wc: np.ndarray
+    scale: float
+    idepth: np.ndarray
+    idepth_var: np.ndarray
+    image: np.ndarray | None
+    camera: Any
+    n_updates: int = 0
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool: pixels with a hypothesis (var > 0)."""
+        return self.idepth_var > 0
+
+    @property
+    def T_wc_sim3(self) -> np.ndarray:
+        """(4, 4) Sim(3) matrix [[s·R, t], [0, 1]] mapping keyframe-unit coordinates to the world."""
+        S = np.array(self.T_wc, dtype=np.float64, copy=True)
+        S[:3, :3] *= self.scale
+        return S
+
+    def points_world(self, max_var: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """World points of the pixels with positive inverse depth, and their colours.
+
+        Parameters
+        ----------
+        max_var : float, optional
+            Keep only hypotheses with idepth_var ≤ max_var (keyframe units).
+
+        Returns
+        -------
+        points : (M, 3) float64, world coordinates.
+        colours : (M, 3) uint8 RGB (grey repeated; mid-grey when there is no image).
+        """
+        m = self.valid & (self.idepth > 0)
+        if max_var is not None:
+            m &= self.idepth_var <= max_var
+        ys, xs = np.nonzero(m)
+        d = 1.0 / self.idepth[ys, xs].astype(np.float64)
+        cam = self.camera
+        Xk = np.stack([(xs - cam.cx) / cam.fx * d, (ys - cam.cy) / cam.fy * d, d], axis=1)
+        S = self.T_wc_sim3
+        pts = Xk @ S[:3, :3].T + S[:3, 3]
+        if self.image is None:
+            col = np.full((len(xs), 3), 128, np.uint8)
+        elif self.image.ndim == 2:
+            col = np.repeat(self.image[ys, xs][:, None], 3, axis=1).astype(np.uint8)
+        else:
+            col = self.image[ys, xs, :3].astype(np.uint8)
+        return pts, col
+
+
+@runtime_checkable
+class OutputSink(Protocol):
+    """What the odometry calls with its outputs (see the module docstring for when)."""
+
+    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        """A tracked frame's camera-to-world pose (4×4 float64 SE(3))."""
+
+    def on_keyframe(
+        self,
+        keyframe_id: int,
+        frame_index: int,
+        timestamp: float,
+        T_wc: np.ndarray,
+        depthmap_snapshot: KeyframeSnapshot,
+    ) -> None:
+        """A finished keyframe with its final depth."""
+
+    def on_lost(self, frame_index: int, reason: str) -> None:
+        """Tracking was lost at ``frame_index``."""
+
+    def close(self) -> None:
+        """No more calls follow."""
+
+
+@dataclass
+class MemorySink:
+    """Records every call (poses are copied)."""
+
+    frames: list[tuple[int, float, np.ndarray]] = field(default_factory=list)
+    keyframes: list[KeyframeSnapshot] = field(default_factory=list)
+    lost: list[tuple[int, str]] = field(default_factory=list)
+    closed: bool = False
+
+    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        self.frames.append((int(frame_index), float(timestamp), np.array(T_wc, dtype=np.float64)))
+
+    def on_keyframe(
+        self,
+        keyframe_id: int,
+        frame_index: int,
+        timestamp: float,
+        T_wc: np.ndarray,
+        depthmap_snapshot: KeyframeSnapshot,
+    ) -> None:
+        self.keyframes.append(depthmap_snapshot)
+
+    def on_lost(self, frame_index: int, reason: str) -> None:
+        self.lost.append((int(frame_index), str(reason)))
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class MultiSink:
+    """Forwards every call to each of ``sinks`` in order."""
+
+    def __init__(self, *sinks: OutputSink):
+        self.sinks = list(sinks)
+
+    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        for s in self.sinks:
+            s.on_frame(frame_index, timestamp, T_wc)
+
+    def on_keyframe(
+        self,
+        keyframe_id: int,
+        frame_index: int,
+        timestamp: float,
+        T_wc: np.ndarray,
+        depthmap_snapshot: KeyframeSnapshot,
+    ) -> None:
+        for s in self.sinks:
+            s.on_keyframe(keyframe_id, frame_index, timestamp, T_wc, depthmap_snapshot)
+
+    def on_lost(self, frame_index: int, reason: str) -> None:
+        for s in self.sinks:
+            s.on_lost(frame_index, reason)
+
+    def close(self) -> None:
+        for s in self.sinks:
+            s.close()

@@ -1,0 +1,416 @@
+"""Single-process, deterministic semi-dense visual odometry (LSD-SLAM's VO with single-threaded mapping).
+
+Per frame (:meth:`VisualOdometry.process`):
+
+1. build the feature pyramid (:func:`~dmtrack.odometry.frame.build_frame`);
+2. the first frame becomes keyframe 0 (pose identity) with a seeded random depth map;
+3. every later frame is tracked against the current keyframe (:class:`~dmtrack.odometry.tracker.Tracker`),
+   starting from the previous frame's pose relative to that keyframe (constant position);
+4. tracking is *lost* when the tracker diverged, or — once more than ``keyframe.loss_not_good_after``
+   keyframes exist — when its quality test fails; the frame gets no pose, is not mapped, and (with
+   ``stop_on_loss``) the odometry stops;
+5. new keyframe when the current one has been mapped more than ``keyframe.min_mapped`` times and
+   (|t_kf|·meanIdepth)²·KFDistWeight² + (1 − pointUsage)²·KFUsageWeight² > ``keyframe.threshold``
+   (t_kf = frame position in keyframe coordinates): the frame becomes the keyframe, its depth is propagated
+   from the old one (:meth:`DepthMap.create_keyframe`), and its pose chains as Sim(3):
+   S_w,new = S_w,old · Sim3(T_fk⁻¹, ρ) with ρ the new map's mean-inverse-depth normalisation;
+   otherwise the frame is mapped into the keyframe (:meth:`DepthMap.update`).
+
+Frame poses: T_wc = S_wk · T_fk⁻¹ reduced to SE(3) (rotation without the scale, translation in world units);
+the world unit is the first keyframe's (mean inverse depth 1), up to the drift of the monocular scale.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dmtrack.odometry.config import VOConfig
+from dmtrack.odometry.depthmap import DepthMap
+from dmtrack.odometry.frame import Frame, build_frame
+from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
+from dmtrack.odometry.tracker import Tracker, TrackingReference, TrackResult
+
+if TYPE_CHECKING:  # pragma: no cover
+    from dmtrack.geometry.camera import PinholeCamera
+
+__all__ = ["FrameResult", "KeyframeRecord", "VOResult", "VisualOdometry", "keyframe_score"]
+
+
+def keyframe_score(T_fk: np.ndarray, mean_idepth: float, point_usage: float, dist_w: float, usage_w: float) -> float:
+    """LSD-SLAM's keyframe score (|t·meanIdepth|²·dist_w² + (1 − usage)²·usage_w²).
+
+    ``t`` is the frame's position in keyframe coordinates (translation of T_fk⁻¹).
+    """
+    R = T_fk[:3, :3]
+    t_kf = -R.T @ T_fk[:3, 3]
+    d = t_kf * mean_idepth
+    return float(d @ d) * dist_w * dist_w + (1.0 - point_usage) ** 2 * usage_w * usage_w
+
+
+def _sim3(T: np.ndarray, s: float) -> np.ndarray:
+    """4×4 Sim(3) matrix [[s·R, t], [0, 1]] from an SE(3) matrix and a scale."""
+    S = np.array(T, dtype=np.float64, copy=True)
+    S[:3, :3] *= s
+    return S
+
+
+def _se3_part(S: np.ndarray, s: float) -> np.ndarray:
+    """SE(3) part of a Sim(3) matrix of scale ``s``: rotation without the scale, same translation."""
+    T = np.array(S, dtype=np.float64, copy=True)
+    T[:3, :3] /= s
+    return T
+
+
+def _inv_se3(T: np.ndarray) -> np.ndarray:
+    Ti = np.eye(4)
+    R = T[:3, :3]
+    Ti[:3, :3] = R.T
+    Ti[:3, 3] = -R.T @ T[:3, 3]
+    return Ti
+
+
+@dataclass
+class FrameResult:
+    """What happened to one frame.
+
+    Attributes
+    ----------
+    index, timestamp
+        As passed to :meth:`VisualOdometry.process`.
+    T_wc : np.ndarray | None
+        (4, 4) SE(3) camera-to-world pose; None when the frame was not tracked.
+    tracked : bool
+        The frame has a pose (the first frame counts as tracked).
+    is_keyframe : bool
+        The frame became a keyframe.
+    keyframe_id : int
+        The keyframe it was tracked against, or the one it became; −1 if not processed.
+    lost_reason : str | None
+        Why tracking was lost (or "stopped: …" for frames after a loss with ``stop_on_loss``).
+    track : TrackResult | None
+        The tracker's full result (None for the first frame and for skipped frames).
+    pyramid_ms, tracking_ms, mapping_ms : float
+        Wall time of the feature pyramid, of tracking (reference rebuild + LM) and of mapping (depth update or
+        keyframe creation / initialisation), milliseconds.
+    """
+
+    index: int
+    timestamp: float
+    T_wc: np.ndarray | None
+    tracked: bool
+    is_keyframe: bool
+    keyframe_id: int
+    lost_reason: str | None = None
+    track: TrackResult | None = None
+    pyramid_ms: float = 0.0
+    tracking_ms: float = 0.0
+    mapping_ms: float = 0.0
+
+
+@dataclass
+class KeyframeRecord:
+    """A keyframe: id, the frame it came from, SE(3) pose T_wc, Sim(3) scale and its parent's ρ."""
+
+    keyframe_id: int
+    frame_index: int
+    timestamp: float
+    T_wc: np.ndarray
+    scale: float
+    scale_from_parent: float
+
+
+@dataclass
+class VOResult:
+    """Summary of a run (see :meth:`VisualOdometry.result`).
+
+    Attributes
+    ----------
+    indices : (n,) int64 — tracked frame indices, in processing order.
+    timestamps : (n,) float64.
+    poses : (n, 4, 4) float64 — SE(3) T_wc of the tracked frames.
+    keyframes : list[KeyframeRecord].
+    lost : list[(frame index, reason)].
+    lost_at : first lost frame index, or None.
+    total_frames : frames passed to ``process`` (including lost and skipped ones).
+    tracked_frames : frames with a pose.
+    timings_ms : mean per processed frame of ``pyramid``, ``tracking``, ``mapping`` and ``total``.
+    """
+
+    indices: np.ndarray
+    timestamps: np.ndarray
+    poses: np.ndarray
+    keyframes: list[KeyframeRecord]
+    lost: list[tuple[int, str]]
+    lost_at: int | None
+    total_frames: int
+    tracked_frames: int
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+class VisualOdometry:
+    """Deterministic single-process semi-dense VO over N-channel feature maps.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+        Level-0 intrinsics; the feature maps must be camera.width × camera.height (multiples of
+        2^(pyramid_levels−1)).
+    config : VOConfig, optional
+        Parameters (LSD-SLAM defaults).
+    sink : OutputSink, optional
+        Receives poses, keyframes and losses as they happen.
+    use_numba : bool
+        Numba kernels (default) or numpy references (slow; tests only).
+    parallel : bool
+        Multi-threaded numba kernels in the tracker and the depth map (results are identical to serial).
+    """
+
+    def __init__(
+        self,
+        camera: PinholeCamera,
+        config: VOConfig | None = None,
+        sink: OutputSink | None = None,
+        use_numba: bool = True,
+        parallel: bool = False,
+    ):
+        self.camera = camera
+        self.config = config if config is not None else VOConfig()
+        self.sink = sink
+        self.use_numba = use_numba
+        self.parallel = parallel
+        self.tracker = Tracker(self.config.tracker, use_numba=use_numba, parallel=parallel)
+        self._levels = tuple(self.config.tracker.levels)
+        # state of the current keyframe
+        self._kf: Frame | None = None
+        self._dm: DepthMap | None = None
+        self._kf_id = -1
+        self._S_wk = np.eye(4)  # Sim(3) keyframe → world
+        self._s_wk = 1.0
+        self._T_fk_last = np.eye(4)
+        self._ref: TrackingReference | None = None
+        self._stopped_at: int | None = None
+        self._finished = False
+        # history
+        self._indices: list[int] = []
+        self._timestamps: list[float] = []
+        self._poses: list[np.ndarray] = []
+        self._keyframes: list[KeyframeRecord] = []
+        self._lost: list[tuple[int, str]] = []
+        self._n_frames = 0
+        self._t_sum = {"pyramid": 0.0, "tracking": 0.0, "mapping": 0.0}
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_keyframes(self) -> int:
+        """Keyframes created so far."""
+        return len(self._keyframes)
+
+    @property
+    def depth_map(self) -> DepthMap | None:
+        """The current keyframe's depth map."""
+        return self._dm
+
+    @property
+    def keyframe(self) -> Frame | None:
+        """The current keyframe."""
+        return self._kf
+
+    @property
+    def stopped(self) -> bool:
+        """True after a tracking loss with ``stop_on_loss`` (further frames are skipped)."""
+        return self._stopped_at is not None
+
+    # ------------------------------------------------------------------ main loop
+    def process(self, index: int, timestamp: float, image: np.ndarray | None, feature_map: np.ndarray) -> FrameResult:
+        """Process one frame.
+
+        Parameters
+        ----------
+        index : int
+            Frame index (increasing).
+        timestamp : float
+            Frame timestamp.
+        image : np.ndarray | None
+            Source uint8 image (grey or RGB), kept with keyframes for point-cloud colours.
+        feature_map : np.ndarray
+            (H, W, N) (or (H, W)) float feature map, grey = 0..255.
+
+        Raises
+        ------
+        InputError
+            If the feature map does not fit the camera or changes its channel count.
+        RuntimeError
+            If called after :meth:`finish`.
+        """
+        if self._finished:
+            raise RuntimeError("process() called after finish()")
+        self._n_frames += 1
+        if self._stopped_at is not None:
+            return FrameResult(
+                index, timestamp, None, False, False, -1, f"stopped: tracking was lost at frame {self._stopped_at}"
+            )
+        t0 = time.perf_counter()
+        frame = build_frame(
+            index, timestamp, image, feature_map, self.camera, self.config.pyramid_levels, self.use_numba
+        )
+        t1 = time.perf_counter()
+        pyramid_ms = 1e3 * (t1 - t0)
+        self._t_sum["pyramid"] += pyramid_ms
+
+        if self._kf is None:
+            return self._initialize(frame, pyramid_ms)
+
+        assert self._dm is not None
+        # ---- tracking
+        t1 = time.perf_counter()
+        if self._ref is None:
+            idepth, var = self._dm.tracking_depth()
+            self._ref = TrackingReference.from_keyframe(self._kf, idepth, var, self._levels, self.use_numba)
+        res = self.tracker.track(self._ref, frame, self._T_fk_last)
+        t2 = time.perf_counter()
+        tracking_ms = 1e3 * (t2 - t1)
+        self._t_sum["tracking"] += tracking_ms
+
+        reason = None
+        if res.diverged:
+            reason = res.reason
+        else:
+            limit = self.config.keyframe.loss_not_good_after
+            if limit is not None and self.n_keyframes > limit and not res.good:
+                reason = res.reason
+        if reason is not None:
+            self._lost.append((int(index), str(reason)))
+            if self.sink is not None:
+                self.sink.on_lost(int(index), str(reason))
+            if self.config.stop_on_loss:
+                self._stopped_at = int(index)
+            return FrameResult(index, timestamp, None, False, False, self._kf_id, reason, res, pyramid_ms, tracking_ms)
+
+        T_fk = res.T_fk
+        T_wc = _se3_part(self._S_wk @ _inv_se3(T_fk), self._s_wk)
+        self._record_pose(index, timestamp, T_wc)
+
+        # ---- keyframe selection and mapping
+        kcfg = self.config.keyframe
+        new_kf = False
+        if self._dm.n_updates > kcfg.min_mapped:
+            score = keyframe_score(
+                T_fk, self._dm.mean_idepth, res.point_usage, kcfg.kf_dist_weight, kcfg.kf_usage_weight
+            )
+            new_kf = score > kcfg.threshold
+        t3 = time.perf_counter()
+        if new_kf:
+            self._switch_keyframe(frame, res)
+        else:
+            self._dm.update(frame, T_fk, res.ref_pixel_was_good, res.initial_tracked_residual)
+            self._T_fk_last = T_fk
+            self._ref = None
+        mapping_ms = 1e3 * (time.perf_counter() - t3)
+        self._t_sum["mapping"] += mapping_ms
+        return FrameResult(
+            index, timestamp, T_wc, True, new_kf, self._kf_id, None, res, pyramid_ms, tracking_ms, mapping_ms
+        )
+
+    def _initialize(self, frame: Frame, pyramid_ms: float) -> FrameResult:
+        t0 = time.perf_counter()
+        dm = DepthMap(self.config.depth, use_numba=self.use_numba, parallel=self.parallel)
+        dm.initialize_random(frame, self.config.seed)
+        self._kf, self._dm = frame, dm
+        self._kf_id = 0
+        self._S_wk = np.eye(4)
+        self._s_wk = 1.0
+        self._T_fk_last = np.eye(4)
+        self._ref = None
+        self._keyframes.append(KeyframeRecord(0, frame.index, frame.timestamp, np.eye(4), 1.0, 1.0))
+        mapping_ms = 1e3 * (time.perf_counter() - t0)
+        self._t_sum["mapping"] += mapping_ms
+        T_wc = np.eye(4)
+        self._record_pose(frame.index, frame.timestamp, T_wc)
+        return FrameResult(frame.index, frame.timestamp, T_wc, True, True, 0, None, None, pyramid_ms, 0.0, mapping_ms)
+
+    def _switch_keyframe(self, frame: Frame, res: TrackResult) -> None:
+        assert self._dm is not None and self._kf is not None
+        old_dm, old_kf, old_id = self._dm, self._kf, self._kf_id
+        new_dm = old_dm.create_keyframe(frame, res.T_fk, res.ref_pixel_was_good)  # finalises old_dm in place
+        self._emit_keyframe(old_id, old_kf, old_dm)
+        rho = float(new_dm.scale_from_parent)
+        self._S_wk = self._S_wk @ _sim3(_inv_se3(res.T_fk), rho)
+        self._s_wk *= rho
+        self._kf, self._dm = frame, new_dm
+        self._kf_id = old_id + 1
+        self._T_fk_last = np.eye(4)
+        self._ref = None
+        self._keyframes.append(
+            KeyframeRecord(
+                self._kf_id, frame.index, frame.timestamp, _se3_part(self._S_wk, self._s_wk), self._s_wk, rho
+            )
+        )
+
+    def _emit_keyframe(self, kf_id: int, kf: Frame, dm: DepthMap) -> None:
+        if self.sink is None:
+            return
+        rec = self._keyframes[kf_id]
+        idepth, var = dm.tracking_depth()
+        snap = KeyframeSnapshot(
+            keyframe_id=kf_id,
+            frame_index=kf.index,
+            timestamp=kf.timestamp,
+            T_wc=rec.T_wc.copy(),
+            scale=rec.scale,
+            idepth=idepth,
+            idepth_var=var,
+            image=kf.image,
+            camera=kf.camera,
+            n_updates=dm.n_updates,
+        )
+        self.sink.on_keyframe(kf_id, kf.index, kf.timestamp, rec.T_wc.copy(), snap)
+
+    def _record_pose(self, index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        self._indices.append(int(index))
+        self._timestamps.append(float(timestamp))
+        self._poses.append(T_wc)
+        if self.sink is not None:
+            self.sink.on_frame(int(index), float(timestamp), T_wc.copy())
+
+    # ------------------------------------------------------------------ end
+    def finish(self) -> VOResult:
+        """Finalise the last keyframe (fill holes, regularise), emit it, close the sink; return :meth:`result`.
+
+        Idempotent; :meth:`process` may not be called afterwards.
+        """
+        if not self._finished:
+            self._finished = True
+            if self._dm is not None and self._kf is not None:
+                self._dm.finalize()
+                self._emit_keyframe(self._kf_id, self._kf, self._dm)
+            if self.sink is not None:
+                self.sink.close()
+        return self.result()
+
+    def result(self) -> VOResult:
+        """Summary of everything processed so far (no side effects)."""
+        n = max(self._n_frames, 1)
+        timings = {k: v / n for k, v in self._t_sum.items()}
+        timings["total"] = sum(timings.values())
+        poses = np.array(self._poses, dtype=np.float64).reshape(-1, 4, 4)
+        return VOResult(
+            indices=np.array(self._indices, dtype=np.int64),
+            timestamps=np.array(self._timestamps, dtype=np.float64),
+            poses=poses,
+            keyframes=list(self._keyframes),
+            lost=list(self._lost),
+            lost_at=self._lost[0][0] if self._lost else None,
+            total_frames=self._n_frames,
+            tracked_frames=len(self._indices),
+            timings_ms=timings,
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"VisualOdometry(frames={self._n_frames}, tracked={len(self._indices)}, "
+            f"keyframes={self.n_keyframes}, lost={len(self._lost)})"
+        )

@@ -1,0 +1,217 @@
+"""End-to-end odometry (dmtrack.odometry.vo) on a short synthetic sequence with exact poses and depth."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
+from dmtrack.odometry.config import KeyframeConfig, VOConfig
+from dmtrack.odometry.sink import MemorySink, MultiSink, OutputSink
+from dmtrack.odometry.vo import VisualOdometry, keyframe_score
+
+N_FRAMES = 40
+CAMERA = SyntheticConfig(width=320, height=240).camera()
+
+
+@pytest.fixture(scope="module")
+def seq() -> SyntheticSequence:
+    return SyntheticSequence(SyntheticConfig(width=320, height=240, n_frames=N_FRAMES, seed=0))
+
+
+@pytest.fixture(scope="module")
+def frames(seq: SyntheticSequence) -> list:
+    return [seq[i] for i in range(N_FRAMES)]
+
+
+def grey(img: np.ndarray) -> np.ndarray:
+    return img.astype(np.float32)
+
+
+def run(seq, frames, config=None, feature=grey, n=None, sink=None):
+    vo = VisualOdometry(CAMERA, config, sink)
+    results = []
+    for fr in frames[:n]:
+        results.append(vo.process(fr.index, fr.timestamp, fr.image, feature(fr.image)))
+    return vo, results, vo.finish()
+
+
+def umeyama_ate(est: np.ndarray, gt: np.ndarray) -> float:
+    """RMSE of positions after the 7-DoF (Sim(3)) alignment of est onto gt."""
+    mp, mq = est.mean(0), gt.mean(0)
+    C = (gt - mq).T @ (est - mp) / len(est)
+    U, S, Vt = np.linalg.svd(C)
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    R = U @ D @ Vt
+    s = np.trace(np.diag(S) @ D) / ((est - mp) ** 2).sum(1).mean()
+    aligned = s * est @ R.T + (mq - s * R @ mp)
+    return float(np.sqrt(((aligned - gt) ** 2).sum(1).mean()))
+
+
+def rot_angle_deg(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
+@pytest.fixture(scope="module")
+def grey_run(seq, frames):
+    sink = MemorySink()
+    vo, results, res = run(seq, frames, sink=sink)
+    return vo, results, res, sink
+
+
+def test_tracks_synthetic_sequence(seq, grey_run) -> None:
+    vo, results, res, _ = grey_run
+    assert res.total_frames == N_FRAMES and res.tracked_frames == N_FRAMES
+    assert res.lost == [] and res.lost_at is None
+    assert len(res.keyframes) >= 3
+    assert all(r.tracked for r in results)
+    gt = seq.poses[res.indices]
+    path = float(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).sum())
+    ate = umeyama_ate(res.poses[:, :3, 3], gt[:, :3, 3])
+    assert ate < 0.03 * path, (ate, path)
+    # rotation over the whole sequence (scale-free)
+    dR = (gt[0, :3, :3].T @ gt[-1, :3, :3]).T @ (res.poses[0, :3, :3].T @ res.poses[-1, :3, :3])
+    total = rot_angle_deg(gt[0, :3, :3].T @ gt[-1, :3, :3])
+    assert total > 10 and rot_angle_deg(dR) < 0.1 * total
+    # poses are proper SE(3)
+    for T in res.poses:
+        np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9)
+        np.testing.assert_array_equal(T[3], [0, 0, 0, 1])
+    # timings are recorded
+    assert res.timings_ms["tracking"] > 0 and res.timings_ms["mapping"] > 0
+    assert all(r.tracking_ms > 0 for r in results[1:])
+
+
+def test_keyframe_chain_and_sink(seq, grey_run) -> None:
+    vo, results, res, sink = grey_run
+    # every tracked frame reached the sink in order, every keyframe once after it was finished
+    assert [f[0] for f in sink.frames] == list(res.indices)
+    for (_, _, T), T2 in zip(sink.frames, res.poses, strict=True):
+        np.testing.assert_array_equal(T, T2)
+    assert [k.keyframe_id for k in sink.keyframes] == list(range(len(res.keyframes)))
+    assert sink.closed
+    kf_frames = [r.index for r in results if r.is_keyframe]
+    assert kf_frames == [k.frame_index for k in res.keyframes]
+    pose_of = dict(zip(res.indices.tolist(), res.poses, strict=True))
+    for rec, snap in zip(res.keyframes, sink.keyframes, strict=True):
+        # the keyframe's SE(3) pose is the pose of the frame it came from (Sim(3) scale aside)
+        np.testing.assert_allclose(rec.T_wc, pose_of[rec.frame_index], atol=1e-12)
+        assert snap.scale == pytest.approx(rec.scale) and snap.frame_index == rec.frame_index
+    # keyframe k's depth in its own units is L·s_k times the true inverse depth (L: world unit in metres):
+    # the Sim(3) chain is consistent when idepth_k / (idepth_true · s_k) is the same for every keyframe
+    Ls = []
+    for snap in sink.keyframes[1:]:
+        gt = 1.0 / seq.depth(snap.frame_index)
+        m = snap.valid & (snap.idepth > 0)
+        assert m.sum() > 0.3 * m.size
+        ratio = snap.idepth[m] / gt[m]
+        log_dev = np.abs(np.log(ratio) - np.median(np.log(ratio)))
+        assert np.median(log_dev) < 0.1  # depth maps are accurate (up to scale)
+        Ls.append(np.median(ratio) / snap.scale)
+    assert max(Ls) / min(Ls) < 1.05, Ls
+    # world points of the last keyframe lie near the true surface (after scaling by L)
+    snap = sink.keyframes[-1]
+    pts, col = snap.points_world()
+    assert pts.shape[1] == 3 and col.dtype == np.uint8 and len(pts) == len(col)
+    gt_depth = seq.depth(snap.frame_index)
+    L = Ls[-1]
+    # reproject: camera-frame points of the keyframe (world → keyframe with the estimated pose)
+    Xc = (pts - snap.T_wc[:3, 3]) @ snap.T_wc[:3, :3]
+    u = np.round(snap.camera.fx * Xc[:, 0] / Xc[:, 2] + snap.camera.cx).astype(int)
+    v = np.round(snap.camera.fy * Xc[:, 1] / Xc[:, 2] + snap.camera.cy).astype(int)
+    ok = (u >= 0) & (u < 320) & (v >= 0) & (v < 240)
+    rel = np.abs(Xc[ok, 2] * L - gt_depth[v[ok], u[ok]]) / gt_depth[v[ok], u[ok]]
+    assert np.median(rel) < 0.1
+
+
+def test_deterministic(seq, frames, grey_run) -> None:
+    _, _, res1, _ = grey_run
+    _, _, res2 = run(seq, frames, n=20)
+    assert res2.poses.tobytes() == res1.poses[:20].tobytes()
+
+
+def test_multichannel_feature(seq, frames) -> None:
+    def two_channels(img: np.ndarray) -> np.ndarray:
+        g = img.astype(np.float32)
+        sq = cv2.blur(g, (3, 3)) ** 2 / 255.0  # a second, nonlinearly related channel
+        return np.ascontiguousarray(np.stack([g, sq], axis=-1))
+
+    vo, results, res = run(seq, frames, feature=two_channels, n=25)
+    assert res.tracked_frames == 25 and not res.lost
+    gt = seq.poses[res.indices]
+    path = float(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1).sum())
+    assert umeyama_ate(res.poses[:, :3, 3], gt[:, :3, 3]) < 0.05 * path
+    assert vo.keyframe is not None and vo.keyframe.n_channels == 2
+
+
+def test_loss_detection_and_stop(seq, frames) -> None:
+    cfg = VOConfig(keyframe=KeyframeConfig(loss_not_good_after=0))
+    sink = MemorySink()
+    vo = VisualOdometry(CAMERA, cfg, MultiSink(sink))
+    for fr in frames[:5]:
+        vo.process(fr.index, fr.timestamp, fr.image, grey(fr.image))
+    flat = np.full((240, 320), 250.0, np.float32)  # no texture: most residuals exceed the good/bad bound
+    r = vo.process(5, 5.0, None, flat)
+    assert not r.tracked and r.T_wc is None and r.lost_reason and "not good" in r.lost_reason
+    assert vo.stopped and sink.lost == [(5, r.lost_reason)]
+    r2 = vo.process(6, 6.0, frames[6].image, grey(frames[6].image))
+    assert not r2.tracked and r2.lost_reason.startswith("stopped")
+    res = vo.finish()
+    assert res.lost_at == 5 and res.tracked_frames == 5 and res.total_frames == 7
+    with pytest.raises(RuntimeError):
+        vo.process(7, 7.0, None, grey(frames[7].image))
+
+
+def test_continue_after_loss(seq, frames) -> None:
+    cfg = VOConfig(keyframe=KeyframeConfig(loss_not_good_after=0), stop_on_loss=False)
+    vo = VisualOdometry(CAMERA, cfg)
+    for fr in frames[:5]:
+        vo.process(fr.index, fr.timestamp, fr.image, grey(fr.image))
+    bad = vo.process(5, 5.0, None, np.zeros((240, 320), np.float32) + 255.0)
+    assert not bad.tracked
+    nxt = vo.process(6, frames[6].timestamp, frames[6].image, grey(frames[6].image))
+    assert nxt.tracked and not vo.stopped
+    res = vo.finish()
+    assert res.lost == [(5, bad.lost_reason)] and res.tracked_frames == 6
+
+
+def test_keyframe_score() -> None:
+    T = np.eye(4)
+    T[:3, 3] = [0.1, 0.0, 0.0]  # keyframe → frame: the frame sits at x = −0.1 in keyframe coordinates
+    assert keyframe_score(T, 2.0, 1.0, 3.0, 4.0) == pytest.approx(0.2**2 * 9)
+    assert keyframe_score(np.eye(4), 1.0, 0.9, 3.0, 4.0) == pytest.approx(0.01 * 16)
+
+
+def test_sink_protocol() -> None:
+    assert isinstance(MemorySink(), OutputSink)
+    assert isinstance(MultiSink(), OutputSink)
+
+
+def test_config_defaults_overrides_and_yaml(tmp_path) -> None:
+    from dmtrack.errors import InputError
+
+    c = VOConfig()
+    assert (c.tracker.huber_d, c.tracker.camera_pixel_noise2, c.tracker.convergence_eps) == (3.0, 16.0, 0.999)
+    assert c.tracker.levels == (4, 3, 2, 1) and c.tracker.max_its == (5, 20, 50, 100, 100)
+    assert (c.keyframe.kf_dist_weight, c.keyframe.kf_usage_weight, c.keyframe.threshold) == (3.0, 4.0, 0.14)
+    assert (c.depth.min_use_grad, c.depth.max_var, c.depth.var_random_init_initial) == (5.0, 0.25, 0.125)
+    assert VOConfig.from_dict(c.to_dict()) == c
+    o = c.with_overrides("tracker.huber_d=2", "tracker.levels=[3,2,1]", "depth.ssd_reduction=mean", "seed=7")
+    assert o.tracker.huber_d == 2.0 and o.tracker.levels == (3, 2, 1) and o.depth.ssd_reduction == "mean"
+    assert o.seed == 7 and c.tracker.huber_d == 3.0
+    assert c.with_overrides("keyframe.loss_not_good_after=null").keyframe.loss_not_good_after is None
+    for bad in ("tracker.nope=1", "tracker.huber_d", "tracker.affine=3", "depth.ssd_reduction=median"):
+        with pytest.raises(InputError):
+            c.with_overrides(bad)
+    p = tmp_path / "vo.yaml"
+    p.write_text("tracker:\n  affine: true\nkeyframe:\n  threshold: 0.2\n")
+    y = VOConfig.from_yaml(p)
+    assert y.tracker.affine and y.keyframe.threshold == 0.2
+    p.write_text("tracker:\n  hubr_d: 2\n")
+    with pytest.raises(InputError) as ei:
+        VOConfig.from_yaml(p)
+    assert str(p) in str(ei.value) and "hubr_d" in str(ei.value)
+    with pytest.raises(InputError):
+        VOConfig.from_yaml(tmp_path / "missing.yaml")

@@ -23,6 +23,12 @@ requires_shared = pytest.mark.skipif(
 )
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_user_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The user's calibrated scales / PCA bases (~/.config/dmtrack) must not leak into the tests."""
+    os.environ["DMTRACK_HOME"] = str(tmp_path_factory.mktemp("dmtrack-home"))
+
+
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     if not (SHARED / "data").is_dir():

@@ -84,3 +84,27 @@ def test_eval_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None
     (tmp_path / "est.txt").write_text("0 0 0 0 0 0 0 1\nbroken line\n")
     assert main(["eval", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt")]) == 1
     assert "est.txt:2" in capsys.readouterr().err
+
+
+def test_features_listing(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["features", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    by_name = {r["name"]: r for r in rows}
+    for name, n in (("gray", 1), ("gray-affine", 1), ("rgb", 3), ("lab", 3), ("bitplanes", 8), ("dsift", 128)):
+        assert by_name[name]["channels"] == n
+        assert by_name[name]["needs_torch"] is False
+    assert main(["features"]) == 0
+    assert "bitplanes" in capsys.readouterr().out
+
+
+def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sample_dir: Path) -> None:
+    from dmtrack.features import get_feature
+
+    assert main(["calibrate-scale", "--feature", "rgb", str(sample_dir), "--frames", "2", "--save", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert 0.5 < result["scale"] < 2.0 and Path(result["saved_to"]).is_file()
+    assert get_feature("rgb").scale == pytest.approx(result["scale"])  # used automatically afterwards
+    assert main(["fit-pca", "--feature", "rgb", "--k", "2", str(sample_dir), "--frames", "2", "--samples", "5000"]) == 0
+    assert "rgb-pca2" in capsys.readouterr().out
+    reduced = get_feature("rgb-pca2")  # found in the user's PCA folder
+    assert reduced.channels == 2

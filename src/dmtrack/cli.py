@@ -130,10 +130,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.continue_after_loss:
         config = config.with_overrides("stop_on_loss=false")
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
+    from dmtrack.features import get_feature
+
     result = run_to_directory(
         args.sequence,
         out,
-        feature=args.feature,
+        feature=get_feature(args.feature, **_feature_options(args.feature_opt)),
         config=config,
         start=args.start,
         max_frames=args.max_frames,
@@ -175,6 +177,78 @@ def cmd_features(args: argparse.Namespace) -> int:
         print(f"{r['name']:<16} {r['channels']:>4}  {scale:>8}  {r.get('pyramid', ''):<10} {needs:<14} "
               f"{r.get('description', '')}")
     return 0
+
+
+def _sample_images(sequences: list[str], n: int, fmt: str | None, intrinsics: str | None) -> list:
+    """``n`` frames spread evenly over each sequence (uint8 images)."""
+    import numpy as np
+
+    from dmtrack.datasets import open_sequence
+
+    images = []
+    for path in sequences:
+        seq = open_sequence(path, format=fmt, intrinsics=intrinsics)
+        idx = np.unique(np.linspace(0, len(seq) - 1, min(n, len(seq))).round().astype(int))
+        images.extend(seq[int(i)].image for i in idx)
+    return images
+
+
+def cmd_calibrate_scale(args: argparse.Namespace) -> int:
+    from dmtrack.features import get_feature
+    from dmtrack.features.base import save_user_scale
+    from dmtrack.features.scale import calibrate_scale_detailed
+
+    feature = get_feature(args.feature, **_feature_options(args.feature_opt))
+    images = _sample_images(args.sequences, args.frames, args.format, None)
+    cal = calibrate_scale_detailed(feature, images, args.min_use_grad)
+    result = {"feature": feature.name, "scale": cal.scale, "images": len(images), "min_use_grad": args.min_use_grad,
+              **{k: v for k, v in vars(cal).items() if k != "scale" and isinstance(v, (int, float, str))}}
+    if args.save:
+        result["saved_to"] = str(save_user_scale(feature.name, cal.scale, images=len(images),
+                                                 sequences=[str(s) for s in args.sequences]))
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"default feature scale of {feature.name}: {cal.scale:.6g}  ({len(images)} images, "
+              f"gradient threshold {args.min_use_grad:g})")
+        if args.save:
+            print(f"saved to {result['saved_to']}: used from now on when --feature {feature.name} has no scale")
+    return 0
+
+
+def cmd_fit_pca(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dmtrack.features import get_feature
+    from dmtrack.features.base import user_pca_path
+    from dmtrack.features.pca import fit_pca
+
+    feature = get_feature(args.feature, **_feature_options(args.feature_opt))
+    images = _sample_images(args.sequences, args.frames, args.format, None)
+    basis = fit_pca(feature, images, k=args.k, n_samples=args.samples, seed=args.seed)
+    out = Path(args.out) if args.out else user_pca_path(feature.name, args.k)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    basis.save(out)
+    ratio = getattr(basis, "explained_variance_ratio", None)
+    kept = f", {100 * float(sum(ratio)):.1f}% of the variance" if ratio is not None else ""
+    print(f"PCA basis of {feature.name}: {args.k} of {feature.channels} components{kept} -> {out}")
+    print(f"use it with --feature {feature.name}-pca{args.k}")
+    return 0
+
+
+def _feature_options(items: list[str] | None) -> dict[str, Any]:
+    """``key=value`` feature options; values parsed as YAML scalars (numbers, true/false, strings)."""
+    import yaml
+
+    from dmtrack.errors import InputError
+
+    options: dict[str, Any] = {}
+    for item in items or []:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(f"--feature-opt {item!r}: expected key=value")
+        options[key.strip()] = yaml.safe_load(raw)
+    return options
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -224,6 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="track a sequence and write trajectory, point cloud, depth images, metrics")
     _add_sequence_args(p)
     p.add_argument("--feature", default="gray", help="feature name (see `dmtrack features`; default gray)")
+    p.add_argument("--feature-opt", action="append", metavar="KEY=VALUE",
+                   help="feature option, e.g. scale=2 or pca=basis.npz (repeatable)")
     p.add_argument("--out", help="output folder (default out/SEQUENCE-FEATURE)")
     p.add_argument("--start", type=int, default=0, metavar="N", help="first frame (default 0)")
     p.add_argument("--max-frames", type=int, metavar="N", help="process at most N frames")
@@ -244,6 +320,33 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("features", help="list the available features")
     p.add_argument("--json", action="store_true", help="print a JSON list")
     p.set_defaults(func=cmd_features)
+
+    def sampling_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--feature", required=True, help="feature name")
+        p.add_argument("--feature-opt", action="append", metavar="KEY=VALUE", help="feature option (repeatable)")
+        p.add_argument("sequences", nargs="+", metavar="SEQUENCE", help="sequences to sample frames from")
+        p.add_argument("--frames", type=int, default=20, metavar="N", help="frames per sequence (default 20)")
+        from dmtrack.datasets.registry import FORMATS
+
+        p.add_argument("--format", choices=FORMATS, help="force the dataset format")
+
+    p = sub.add_parser(
+        "calibrate-scale",
+        help="find a feature's default scale (paper §2.4): as many pixels above minUseGrad as grey",
+    )
+    sampling_args(p)
+    p.add_argument("--min-use-grad", type=float, default=5.0, help="gradient threshold (default 5, LSD-SLAM)")
+    p.add_argument("--save", action="store_true", help="store it in the user's table, used automatically afterwards")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_calibrate_scale)
+
+    p = sub.add_parser("fit-pca", help="fit a PCA basis reducing a feature to K channels (FEATURE-pcaK)")
+    sampling_args(p)
+    p.add_argument("--k", type=int, required=True, help="number of components")
+    p.add_argument("--samples", type=int, default=200_000, help="pixels sampled in total (default 200000)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling (default 0)")
+    p.add_argument("--out", help="output .npz (default: the user's PCA folder, found automatically by FEATURE-pcaK)")
+    p.set_defaults(func=cmd_fit_pca)
 
     p = sub.add_parser(
         "eval",

@@ -33,6 +33,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import json
+import os
 import re
 import threading
 from abc import ABC, abstractmethod
@@ -274,9 +275,52 @@ def default_scales_table() -> dict[str, Any]:
     return table
 
 
+def user_dir() -> Path:
+    """Where dmtrack keeps what users calibrate and fit: ``$DMTRACK_HOME``, else ``~/.config/dmtrack``."""
+    env = os.environ.get("DMTRACK_HOME")
+    return Path(env) if env else Path.home() / ".config" / "dmtrack"
+
+
+def user_scales_path() -> Path:
+    """The user's table of calibrated feature scales (written by ``dmtrack calibrate-scale --save``)."""
+    return user_dir() / "scales.json"
+
+
+def user_scales() -> dict[str, Any]:
+    """``{name: {"scale": float, ...}}`` from :func:`user_scales_path` (empty when there is none)."""
+    path = user_scales_path()
+    if not path.is_file():
+        return {}
+    try:
+        table = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read the calibrated scales ({exc})", path=path) from None
+    scales = table.get("scales") if isinstance(table, dict) else None
+    if not isinstance(scales, dict):
+        raise InputError("malformed scales file (expected {\"scales\": {name: {\"scale\": ...}}})", path=path)
+    return scales
+
+
+def save_user_scale(name: str, scale: float, **details: Any) -> Path:
+    """Store a calibrated scale for ``name`` in the user's table (atomically); returns the file."""
+    path = user_scales_path()
+    scales = user_scales()
+    scales[name] = {"scale": check_scale(scale), **details}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps({"scales": scales}, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def user_pca_path(base: str, k: int | None = None) -> Path:
+    """Where ``dmtrack fit-pca`` stores a basis: ``pca/BASE-pcaK.npz`` (or ``pca/BASE.npz`` for all components)."""
+    return user_dir() / "pca" / (f"{base}-pca{k}.npz" if k is not None else f"{base}.npz")
+
+
 def default_scale(name: str) -> float | None:
-    """Calibrated default scale of feature ``name`` from ``default_scales.json``, or None when not listed."""
-    entry = default_scales_table()["scales"].get(name)
+    """Default scale of feature ``name``: the user's calibration if any, else ``default_scales.json``'s, else None."""
+    entry = user_scales().get(name) or default_scales_table()["scales"].get(name)
     if entry is None:
         return None
     return float(entry["scale"])
@@ -512,9 +556,14 @@ def get_feature(name: str, **options: Any) -> Feature:
         basis = options.pop("pca", None)
         base_scale = options.pop("base_scale", None)
         if basis is None:
+            for candidate in (user_pca_path(base_entry.name, k), user_pca_path(base_entry.name)):
+                if candidate.is_file():
+                    basis = candidate
+                    break
+        if basis is None:
             raise InputError(
-                f"feature {name!r} needs a PCA basis: pass pca=PATH to a .npz written by PcaBasis.save "
-                f"(fit one with dmtrack.features.pca.fit_pca({base_entry.name!r}, images, k))"
+                f"feature {name!r} needs a PCA basis: none in {user_pca_path(base_entry.name, k).parent}; fit one with "
+                f"`dmtrack fit-pca --feature {base_entry.name} --k {k} SEQUENCE...` or pass pca=PATH to a .npz"
             )
         if not isinstance(basis, PcaBasis):
             basis = PcaBasis.load(basis)

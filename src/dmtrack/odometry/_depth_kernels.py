@@ -1,0 +1,1622 @@
+"""Numba kernels of the semi-dense depth map, with plain numpy/python references.
+
+This module implements the per-pixel work of LSD-SLAM's ``DepthMap`` (lsd-slam-spec.md §3) for N-channel
+feature maps (§4): the 5-sample line stereo along the epipolar line, the observe loop (create / update of
+hypotheses with the EKF fusion and the validity / blacklist counters), the radius-2 regularisation (with and
+without occlusion removal), hole filling and the depth propagation into a new keyframe.
+
+Each kernel has a reference implementation written independently in plain numpy / python (``*_reference``),
+used by :class:`dmtrack.odometry.depthmap.DepthMap` when ``use_numba=False`` and by the tests, which check
+that both agree on small images.
+
+Conventions
+-----------
+* Per-pixel state arrays are (H, W): ``valid`` bool, ``blacklisted`` int32, ``next_id`` int32
+  (``nextStereoFrameMinID``), ``validity`` float32 (integer-valued, as LSD-SLAM's ``int validity_counter``),
+  ``idepth``, ``var``, ``idepth_s``, ``var_s`` float32 (raw and smoothed inverse depth and variance).
+* Feature maps are (H, W, N) float32; ``gx``, ``gy`` are the halved central differences of the frame
+  pyramid (so the un-halved LSD-SLAM differences are 2·gx, 2·gy).
+* Channel reduction of every SSD-type quantity (stereo cost, its cross terms, ``gradAlongLine``, the
+  epipolar-gradient check and the propagation colour test): the sum over channels multiplied by ``cscale``
+  (1 for ``"sum"``, 1/N for ``"mean"``).
+* Scalars are computed in float64 and stored as float32 (note: inside numba, ``float()`` of a float32
+  array element stays float32, hence the explicit ``np.float64`` conversions), except the regularisation,
+  which runs in float32 like LSD-SLAM (its reference makes the same float32 decisions).
+* Constants come packed in a float64 vector ``prm`` (see :func:`make_params` and the ``P_*`` indices); the
+  stereo geometry of a (keyframe, frame) pair in ``geo`` (see :func:`stereo_geometry` and ``G_*``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import prange
+
+# ------------------------------------------------------------------------------------------ constants
+#: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
+GRADIENT_SAMPLE_DIST = 1.0
+#: ``DIVISION_EPS``.
+DIVISION_EPS = 1e-10
+#: ``DIFF_FAC_OBSERVE``, ``DIFF_FAC_SMOOTHING``, ``DIFF_FAC_PROP_MERGE`` (all 1 in LSD-SLAM).
+DIFF_FAC_OBSERVE = 1.0
+DIFF_FAC_SMOOTHING = 1.0
+DIFF_FAC_PROP_MERGE = 1.0
+#: ``MAX_DIFF_CONSTANT`` and ``MAX_DIFF_GRAD_MULT`` of the propagation colour test (used only when no
+#: ``refPixelWasGood`` flags are given).
+MAX_DIFF_CONSTANT = 40.0 * 40.0
+MAX_DIFF_GRAD_MULT = 0.5 * 0.5
+#: Level at which the tracker's ``refPixelWasGood`` flags live (``SE3TRACKING_MIN_LEVEL``).
+GOOD_LEVEL = 1
+
+# indices into the parameter vector ``prm``
+P_MIN_GRAD = 0  # MIN_ABS_GRAD_CREATE = MIN_ABS_GRAD_DECREASE = minUseGrad
+P_MAX_VAR = 1
+P_VAR_INIT = 2  # VAR_RANDOM_INIT_INITIAL
+P_SUCC_VAR_INC = 3
+P_FAIL_VAR_INC = 4
+P_VAL_INC = 5
+P_VAL_DEC = 6
+P_VAL_INIT_OBS = 7
+P_VAL_MAX = 8
+P_VAL_MAX_VAR = 9
+P_VAL_SUM_CREATE = 10
+P_VAL_SUM_KEEP = 11
+P_VAL_SUM_UNBL = 12
+P_MIN_BLACKLIST = 13
+P_MIN_DEPTH = 14
+P_MAX_EPL_CROP = 15
+P_MIN_EPL_CROP = 16
+P_BORDER = 17
+P_MAX_ERR = 18
+P_MIN_DIST_ERR = 19
+P_EPL_VAR_FAC = 20
+P_MIN_EPL_GRAD2 = 21
+P_MIN_EPL_LEN2 = 22
+P_MIN_EPL_ANGLE2 = 23
+P_REG_DIST_VAR = 24
+P_ALLOW_NEG = 25
+P_SUBPIXEL = 26
+P_PIX_NOISE2 = 27
+N_PARAMS = 28
+
+# indices into the stereo geometry vector ``geo`` (other = keyframe, this = reference frame)
+G_FX, G_FY, G_CX, G_CY = 0, 1, 2, 3
+G_FXI, G_FYI, G_CXI, G_CYI = 4, 5, 6, 7
+G_KR = 8  # K·R_fk, 9 values row-major (K_otherToThis_R)
+G_KT = 17  # K·t_fk (K_otherToThis_t)
+G_T = 20  # t_fk (otherToThis_t)
+G_R = 23  # R_fk row-major (otherToThis_R_row0..2)
+G_TINV = 32  # t_kf = −R_fkᵀ t_fk: the frame's centre in keyframe coordinates (thisToOther_t)
+G_TRACK_FAC = 35  # 0.25·(1 + initialTrackedResidual)
+N_GEO = 36
+
+# observe counters (columns of the per-row count array)
+C_INVALIDATED_GRAD = 0
+C_CREATE_ATTEMPTED = 1
+C_CREATED = 2
+C_UPDATE_ATTEMPTED = 3
+C_UPDATED = 4
+C_SKIP_SCHEDULED = 5
+C_SKIP_NOT_GOOD = 6
+C_SKIP_EPL = 7
+C_OOB = 8
+C_FAIL = 9
+C_NOT_FOUND = 10
+C_INCONSISTENT = 11
+C_BLACKLISTED = 12
+N_COUNTS = 13
+COUNT_NAMES = (
+    "invalidated_grad",
+    "create_attempted",
+    "created",
+    "update_attempted",
+    "updated",
+    "skip_scheduled",
+    "skip_not_good",
+    "skip_epl",
+    "oob",
+    "fail_ambiguous",
+    "not_found",
+    "inconsistent",
+    "blacklisted",
+)
+
+# propagation counters
+PC_ATTEMPTS = 0
+PC_OOB = 1
+PC_DROPPED_GOOD = 2
+PC_OCCLUDED = 3
+PC_CREATED = 4
+PC_MERGED = 5
+N_PCOUNTS = 6
+PCOUNT_NAMES = ("attempts", "out_of_bounds", "dropped_not_good", "occluded", "created", "merged")
+
+
+def make_params(cfg) -> np.ndarray:
+    """Pack a :class:`~dmtrack.odometry.config.DepthConfig` into the float64 parameter vector ``prm``.
+
+    ``REG_DIST_VAR`` is ``reg_dist_var · depth_smoothing_factor²`` as in LSD-SLAM.
+    """
+    p = np.zeros(N_PARAMS, np.float64)
+    p[P_MIN_GRAD] = cfg.min_use_grad
+    p[P_MAX_VAR] = cfg.max_var
+    p[P_VAR_INIT] = cfg.var_random_init_initial
+    p[P_SUCC_VAR_INC] = cfg.succ_var_inc_fac
+    p[P_FAIL_VAR_INC] = cfg.fail_var_inc_fac
+    p[P_VAL_INC] = cfg.validity_counter_inc
+    p[P_VAL_DEC] = cfg.validity_counter_dec
+    p[P_VAL_INIT_OBS] = cfg.validity_counter_initial_observe
+    p[P_VAL_MAX] = cfg.validity_counter_max
+    p[P_VAL_MAX_VAR] = cfg.validity_counter_max_variable
+    p[P_VAL_SUM_CREATE] = cfg.val_sum_min_for_create
+    p[P_VAL_SUM_KEEP] = cfg.val_sum_min_for_keep
+    p[P_VAL_SUM_UNBL] = cfg.val_sum_min_for_unblacklist
+    p[P_MIN_BLACKLIST] = cfg.min_blacklist
+    p[P_MIN_DEPTH] = cfg.min_depth
+    p[P_MAX_EPL_CROP] = cfg.max_epl_length_crop
+    p[P_MIN_EPL_CROP] = cfg.min_epl_length_crop
+    p[P_BORDER] = cfg.sample_point_to_border
+    p[P_MAX_ERR] = cfg.max_error_stereo
+    p[P_MIN_DIST_ERR] = cfg.min_distance_error_stereo
+    p[P_EPL_VAR_FAC] = cfg.stereo_epl_var_fac
+    p[P_MIN_EPL_GRAD2] = cfg.min_epl_grad_squared
+    p[P_MIN_EPL_LEN2] = cfg.min_epl_length_squared
+    p[P_MIN_EPL_ANGLE2] = cfg.min_epl_angle_squared
+    p[P_REG_DIST_VAR] = cfg.reg_dist_var * cfg.depth_smoothing_factor**2
+    p[P_ALLOW_NEG] = 1.0 if cfg.allow_negative_idepths else 0.0
+    p[P_SUBPIXEL] = 1.0 if cfg.use_subpixel_stereo else 0.0
+    p[P_PIX_NOISE2] = cfg.camera_pixel_noise2
+    return p
+
+
+def stereo_geometry(
+    fx: float, fy: float, cx: float, cy: float, T_fk: np.ndarray, initial_tracked_residual: float
+) -> np.ndarray:
+    """Stereo geometry vector ``geo`` of a keyframe / reference-frame pair (LSD-SLAM ``prepareForStereoWith``).
+
+    Parameters
+    ----------
+    fx, fy, cx, cy : float
+        Level-0 intrinsics (pixels).
+    T_fk : (4, 4) array
+        Keyframe → frame rigid transform (``otherToThis``).
+    initial_tracked_residual : float
+        The tracker's last residual / point usage; sets τ = 0.25·(1 + residual) of the geometric error.
+
+    Returns
+    -------
+    (N_GEO,) float64 array, indexed by the ``G_*`` constants.
+    """
+    T = np.asarray(T_fk, np.float64)
+    R = T[:3, :3]
+    t = T[:3, 3]
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    g = np.zeros(N_GEO, np.float64)
+    g[G_FX], g[G_FY], g[G_CX], g[G_CY] = fx, fy, cx, cy
+    g[G_FXI], g[G_FYI], g[G_CXI], g[G_CYI] = 1.0 / fx, 1.0 / fy, -cx / fx, -cy / fy
+    g[G_KR : G_KR + 9] = (K @ R).ravel()
+    g[G_KT : G_KT + 3] = K @ t
+    g[G_T : G_T + 3] = t
+    g[G_R : G_R + 9] = R.ravel()
+    g[G_TINV : G_TINV + 3] = -R.T @ t
+    g[G_TRACK_FAC] = 0.25 * (1.0 + float(initial_tracked_residual))
+    return g
+
+
+# ============================================================================== numba kernels
+_JIT = {"cache": True, "error_model": "numpy", "nogil": True}
+# small helpers are inlined at numba-IR level: LLVM does not inline across separately compiled (cached)
+# numba functions, and a call per bilinear sample costs ~3x the sample itself
+_JIT_INLINE = {**_JIT, "inline": "always"}
+
+
+@numba.njit(**_JIT_INLINE)
+def _unzero(v: float) -> float:  # pragma: no cover - compiled
+    if v < 0.0:
+        return -1e-10 if v > -1e-10 else v
+    return 1e-10 if v < 1e-10 else v
+
+
+@numba.njit(**_JIT_INLINE)
+def _sample(img, x, y, out, row):  # pragma: no cover - compiled
+    """Bilinear sample of all channels of ``img`` at (x, y) into ``out[row, :]`` (LSD getInterpolatedElement)."""
+    ix = int(x)
+    iy = int(y)
+    dx = x - ix
+    dy = y - iy
+    dxdy = dx * dy
+    w11 = dxdy
+    w01 = dy - dxdy
+    w10 = dx - dxdy
+    w00 = 1.0 - dx - dy + dxdy
+    if img.shape[2] == 1:  # grey fast path (same arithmetic)
+        out[row, 0] = (
+            w11 * img[iy + 1, ix + 1, 0] + w01 * img[iy + 1, ix, 0] + w10 * img[iy, ix + 1, 0] + w00 * img[iy, ix, 0]
+        )
+        return
+    for c in range(img.shape[2]):
+        out[row, c] = (
+            w11 * img[iy + 1, ix + 1, c] + w01 * img[iy + 1, ix, c] + w10 * img[iy, ix + 1, c] + w00 * img[iy, ix, c]
+        )
+
+
+@numba.njit(**_JIT_INLINE)
+def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - compiled
+    """``makeAndCheckEPL``: returns (ok, epxn, epyn) with the unit epipolar direction in the keyframe."""
+    epx = -geo[G_FX] * geo[G_TINV] + geo[G_TINV + 2] * (x - geo[G_CX])
+    epy = -geo[G_FY] * geo[G_TINV + 1] + geo[G_TINV + 2] * (y - geo[G_CY])
+    if math.isnan(epx + epy):
+        return False, 0.0, 0.0
+    len2 = epx * epx + epy * epy
+    if len2 < prm[P_MIN_EPL_LEN2]:
+        return False, 0.0, 0.0
+    dot2 = 0.0
+    g2 = 0.0
+    for c in range(kf_gx.shape[2]):
+        gx = 2.0 * kf_gx[y, x, c]
+        gy = 2.0 * kf_gy[y, x, c]
+        d = gx * epx + gy * epy
+        dot2 += d * d
+        g2 += gx * gx + gy * gy
+    epl_grad2 = cscale * dot2 / len2
+    if epl_grad2 < prm[P_MIN_EPL_GRAD2]:
+        return False, 0.0, 0.0
+    if epl_grad2 / (cscale * g2) < prm[P_MIN_EPL_ANGLE2]:
+        return False, 0.0, 0.0
+    fac = GRADIENT_SAMPLE_DIST / math.sqrt(len2)
+    return True, epx * fac, epy * fac
+
+
+@numba.njit(**_JIT_INLINE)
+def _line_stereo(
+    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf
+):  # pragma: no cover - compiled
+    """LSD-SLAM ``doLineStereo`` for N channels.
+
+    ``buf`` is a (4, 5, N) float64 scratch array. Returns (err, idepth, var, epl_length): err ≥ 0 is the
+    matching cost on success; −1 out of bounds, −2 ambiguous / failed, −3 error too large, −4 arithmetic.
+    """
+    h = kf.shape[0]
+    w = kf.shape[1]
+    nch = kf.shape[2]
+    nan = np.nan
+    kfv = buf[0]  # keyframe samples, rows: p2, p1, 0, m1, m2
+    ring = buf[1]  # reference-frame samples around the current search position
+    e_cur = buf[2]  # residuals of this step and of the previous one (for the cross terms)
+    e_prev = buf[3]
+
+    kx = geo[G_FXI] * u + geo[G_CXI]
+    ky = geo[G_FYI] * v + geo[G_CYI]
+    # pInf = K R KinvP ; pReal = pInf / prior + K t
+    pinf0 = geo[G_KR + 0] * kx + geo[G_KR + 1] * ky + geo[G_KR + 2]
+    pinf1 = geo[G_KR + 3] * kx + geo[G_KR + 4] * ky + geo[G_KR + 5]
+    pinf2 = geo[G_KR + 6] * kx + geo[G_KR + 7] * ky + geo[G_KR + 8]
+    kt0 = geo[G_KT]
+    kt1 = geo[G_KT + 1]
+    kt2 = geo[G_KT + 2]
+    preal2 = pinf2 / prior_idepth + kt2
+    rescale = preal2 * prior_idepth
+
+    first_x = u - 2.0 * epxn * rescale
+    first_y = v - 2.0 * epyn * rescale
+    last_x = u + 2.0 * epxn * rescale
+    last_y = v + 2.0 * epyn * rescale
+    if (
+        first_x <= 0
+        or first_x >= w - 2
+        or first_y <= 0
+        or first_y >= h - 2
+        or last_x <= 0
+        or last_x >= w - 2
+        or last_y <= 0
+        or last_y >= h - 2
+    ):
+        return -1.0, nan, nan, nan
+    if not (rescale > 0.7 and rescale < 1.4):
+        return -1.0, nan, nan, nan
+
+    for k in range(5):
+        s = float(2 - k)  # p2, p1, 0, m1, m2
+        _sample(kf, u + s * epxn * rescale, v + s * epyn * rescale, kfv, k)
+
+    # near point (max idepth) and far point (min idepth) in the reference frame
+    pc0 = pinf0 + kt0 * max_idepth
+    pc1 = pinf1 + kt1 * max_idepth
+    pc2 = pinf2 + kt2 * max_idepth
+    if pc2 < 0.001:
+        max_idepth = (0.001 - pinf2) / kt2
+        pc0 = pinf0 + kt0 * max_idepth
+        pc1 = pinf1 + kt1 * max_idepth
+        pc2 = pinf2 + kt2 * max_idepth
+    pclose_x = pc0 / pc2
+    pclose_y = pc1 / pc2
+    pf0 = pinf0 + kt0 * min_idepth
+    pf1 = pinf1 + kt1 * min_idepth
+    pf2 = pinf2 + kt2 * min_idepth
+    if pf2 < 0.001 or max_idepth < min_idepth:
+        return -1.0, nan, nan, nan
+    pfar_x = pf0 / pf2
+    pfar_y = pf1 / pf2
+    if math.isnan(pfar_x + pclose_x):
+        return -4.0, nan, nan, nan
+
+    incx = pclose_x - pfar_x
+    incy = pclose_y - pfar_y
+    epl_length = math.sqrt(incx * incx + incy * incy)
+    if epl_length == 0.0 or math.isinf(epl_length):
+        return -4.0, nan, nan, nan
+    max_crop = prm[P_MAX_EPL_CROP]
+    if epl_length > max_crop:
+        pclose_x = pfar_x + incx * max_crop / epl_length
+        pclose_y = pfar_y + incy * max_crop / epl_length
+    incx *= GRADIENT_SAMPLE_DIST / epl_length
+    incy *= GRADIENT_SAMPLE_DIST / epl_length
+    # extend one sample distance on both sides
+    pfar_x -= incx
+    pfar_y -= incy
+    pclose_x += incx
+    pclose_y += incy
+    min_crop = prm[P_MIN_EPL_CROP]
+    if epl_length < min_crop:
+        pad = (min_crop - epl_length) / 2.0
+        pfar_x -= incx * pad
+        pfar_y -= incy * pad
+        pclose_x += incx * pad
+        pclose_y += incy * pad
+
+    b = prm[P_BORDER]
+    if pfar_x <= b or pfar_x >= w - b or pfar_y <= b or pfar_y >= h - b:
+        return -1.0, nan, nan, nan
+    if pclose_x <= b or pclose_x >= w - b or pclose_y <= b or pclose_y >= h - b:
+        # move the near point back along the line onto the border (the clamped coordinate is set
+        # exactly; LSD-SLAM re-tests it with the strict test it just failed, a float-rounding coin flip)
+        if pclose_x <= b:
+            pclose_y += (b - pclose_x) / incx * incy
+            pclose_x = b
+        elif pclose_x >= w - b:
+            pclose_y += (w - b - pclose_x) / incx * incy
+            pclose_x = w - b
+        if pclose_y <= b:
+            pclose_x += (b - pclose_y) / incy * incx
+            pclose_y = b
+        elif pclose_y >= h - b:
+            pclose_x += (h - b - pclose_y) / incy * incx
+            pclose_y = h - b
+        fincx = pclose_x - pfar_x
+        fincy = pclose_y - pfar_y
+        new_len = math.sqrt(fincx * fincx + fincy * fincy)
+        if not (pclose_x >= b and pclose_x <= w - b and pclose_y >= b and pclose_y <= h - b) or new_len < 8.0:
+            return -1.0, nan, nan, nan
+
+    # search along the line, starting at infinity (pFar). win[j] holds the reference-frame sample at
+    # offset 2 − j from cp (j = 0: +2 … j = 4: −2), the same order as the keyframe samples kfv.
+    cpx = pfar_x
+    cpy = pfar_y
+    win = ring
+    _sample(ref, cpx + incx, cpy + incy, win, 1)
+    _sample(ref, cpx, cpy, win, 2)
+    _sample(ref, cpx - incx, cpy - incy, win, 3)
+    _sample(ref, cpx - 2.0 * incx, cpy - 2.0 * incy, win, 4)
+    # grey fast path: window, keyframe samples and previous residuals in scalars (registers)
+    grey = nch == 1
+    k0 = kfv[0, 0]
+    k1 = kfv[1, 0]
+    k2 = kfv[2, 0]
+    k3 = kfv[3, 0]
+    k4 = kfv[4, 0]
+    v0 = 0.0
+    v1 = win[1, 0]
+    v2 = win[2, 0]
+    v3 = win[3, 0]
+    v4 = win[4, 0]
+    q0 = q1 = q2 = q3 = q4 = 0.0
+
+    loop = 0
+    best_x = -1.0
+    best_y = -1.0
+    best_err = 1e50
+    second_err = 1e50
+    best_pre = nan
+    best_post = nan
+    best_diff_pre = nan
+    best_diff_post = nan
+    best_was_last = False
+    ee_last = -1.0
+    loop_best = -1
+    loop_second = -1
+    while ((incx < 0) == (cpx > pclose_x) and (incy < 0) == (cpy > pclose_y)) or loop == 0:
+        if grey:
+            if loop > 0:
+                v4 = v3
+                v3 = v2
+                v2 = v1
+                v1 = v0
+            _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, 0)
+            v0 = win[0, 0]
+            e0 = v0 - k0
+            e1 = v1 - k1
+            e2 = v2 - k2
+            e3 = v3 - k3
+            e4 = v4 - k4
+            ee = e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4
+            cross = e0 * q0 + e1 * q1 + e2 * q2 + e3 * q3 + e4 * q4
+            q0 = e0
+            q1 = e1
+            q2 = e2
+            q3 = e3
+            q4 = e4
+        else:
+            if loop > 0:
+                # shift the window by one step: offsets −2..+1 take the old −1..+2
+                for j in range(4, 0, -1):
+                    for c in range(nch):
+                        win[j, c] = win[j - 1, c]
+            _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, 0)
+            ee = 0.0
+            cross = 0.0
+            for j in range(5):
+                for c in range(nch):
+                    e = win[j, c] - kfv[j, c]
+                    e_cur[j, c] = e
+                    ee += e * e
+                    cross += e * e_prev[j, c]
+            tmp = e_prev
+            e_prev = e_cur
+            e_cur = tmp
+        ee *= cscale
+        cross = cscale * cross if loop > 0 else nan
+        if ee < best_err:
+            second_err = best_err
+            loop_second = loop_best
+            best_err = ee
+            loop_best = loop
+            best_pre = ee_last
+            best_diff_pre = cross
+            best_post = -1.0
+            best_diff_post = -1.0
+            best_x = cpx
+            best_y = cpy
+            best_was_last = True
+        else:
+            if best_was_last:
+                best_post = ee
+                best_diff_post = cross
+                best_was_last = False
+            if ee < second_err:
+                second_err = ee
+                loop_second = loop
+        ee_last = ee
+        cpx += incx
+        cpy += incy
+        loop += 1
+
+    if best_err > 4.0 * prm[P_MAX_ERR]:
+        return -3.0, nan, nan, nan
+    if abs(loop_best - loop_second) > 1 and prm[P_MIN_DIST_ERR] * best_err > second_err:
+        return -2.0, nan, nan, nan
+
+    did_subpixel = False
+    if prm[P_SUBPIXEL] != 0.0:
+        grad_pre_pre = -(best_pre - best_diff_pre)
+        grad_pre_this = best_err - best_diff_pre
+        grad_post_this = -(best_err - best_diff_post)
+        grad_post_post = best_post - best_diff_post
+        interp_pre = False
+        interp_post = False
+        if best_pre < 0 or best_post < 0:
+            pass  # best at an end of the search segment: no interpolation
+        elif (grad_post_this < 0) ^ (grad_pre_this < 0):
+            pass  # zero crossing exactly in between
+        elif (grad_pre_pre < 0) ^ (grad_pre_this < 0):
+            if not ((grad_post_post < 0) ^ (grad_post_this < 0)):
+                interp_pre = True
+        elif (grad_post_post < 0) ^ (grad_post_this < 0):
+            interp_post = True
+        if interp_pre:
+            d = grad_pre_this / (grad_pre_this - grad_pre_pre)
+            best_x -= d * incx
+            best_y -= d * incy
+            best_err = best_err - 2.0 * d * grad_pre_this - (grad_pre_pre - grad_pre_this) * d * d
+            did_subpixel = True
+        elif interp_post:
+            d = grad_post_this / (grad_post_this - grad_post_post)
+            best_x += d * incx
+            best_y += d * incy
+            best_err = best_err + 2.0 * d * grad_post_this + (grad_post_post - grad_post_this) * d * d
+            did_subpixel = True
+
+    sample_dist = GRADIENT_SAMPLE_DIST * rescale
+    gal = 0.0
+    for k in range(4):
+        for c in range(nch):
+            t = kfv[k, c] - kfv[k + 1, c]
+            gal += t * t
+    gal = cscale * gal / (sample_dist * sample_dist)
+    if best_err > prm[P_MAX_ERR] + math.sqrt(gal) * 20.0:
+        return -3.0, nan, nan, nan
+
+    # inverse depth from the match along the dominant axis
+    t0 = geo[G_T]
+    t1 = geo[G_T + 1]
+    t2 = geo[G_T + 2]
+    dot2 = kx * geo[G_R + 6] + ky * geo[G_R + 7] + geo[G_R + 8]
+    if incx * incx > incy * incy:
+        old_x = geo[G_FXI] * best_x + geo[G_CXI]
+        nom = old_x * t2 - t0
+        dot0 = kx * geo[G_R + 0] + ky * geo[G_R + 1] + geo[G_R + 2]
+        idnew = (dot0 - old_x * dot2) / nom
+        alpha = incx * geo[G_FXI] * (dot0 * t2 - dot2 * t0) / (nom * nom)
+    else:
+        old_y = geo[G_FYI] * best_y + geo[G_CYI]
+        nom = old_y * t2 - t1
+        dot1 = kx * geo[G_R + 3] + ky * geo[G_R + 4] + geo[G_R + 5]
+        idnew = (dot1 - old_y * dot2) / nom
+        alpha = incy * geo[G_FYI] * (dot1 * t2 - dot2 * t1) / (nom * nom)
+    if idnew < 0 and prm[P_ALLOW_NEG] == 0.0:
+        return -2.0, nan, nan, nan
+
+    photo = 4.0 * prm[P_PIX_NOISE2] / (gal + DIVISION_EPS)
+    tau = geo[G_TRACK_FAC]
+    iu = int(u)
+    iv = int(v)
+    gg = 0.0
+    ge = 0.0
+    for c in range(nch):
+        gxc = kf_gx[iv, iu, c]
+        gyc = kf_gy[iv, iu, c]
+        gg += gxc * gxc + gyc * gyc
+        d = gxc * epxn + gyc * epyn
+        ge += d * d
+    geo_err = tau * tau * (cscale * gg) / (cscale * ge + DIVISION_EPS)
+    disc = 0.05 if did_subpixel else 0.5
+    var = alpha * alpha * (disc * sample_dist * sample_dist + geo_err + photo)
+    return best_err, idnew, var, epl_length
+
+
+@numba.njit(**_JIT)
+def line_stereo_numba(
+    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale
+):  # pragma: no cover - compiled
+    """Single-pixel line stereo (allocates its own scratch). See :func:`line_stereo_reference`."""
+    buf = np.empty((4, 5, kf.shape[2]), np.float64)
+    return _line_stereo(
+        kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf
+    )
+
+
+def _observe_impl(
+    valid,
+    blacklisted,
+    next_id,
+    validity,
+    idepth,
+    var,
+    idepth_s,
+    var_s,
+    kf,
+    kf_gx,
+    kf_gy,
+    kf_mg,
+    ref,
+    good,
+    use_good,
+    geo,
+    prm,
+    cscale,
+    frame_id,
+    skip_ratio,
+    counts,
+):  # pragma: no cover - compiled
+    h, w = valid.shape
+    nch = kf.shape[2]
+    min_grad = prm[P_MIN_GRAD]
+    max_var = prm[P_MAX_VAR]
+    max_depth_id = 1.0 / prm[P_MIN_DEPTH]
+    for y in prange(3, h - 3):
+        buf = np.empty((4, 5, nch), np.float64)
+        for x in range(3, w - 3):
+            has = valid[y, x]
+            mg = kf_mg[y, x]
+            if has and mg < min_grad:
+                valid[y, x] = False
+                counts[y, C_INVALIDATED_GRAD] += 1
+                continue
+            if mg < min_grad or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
+                continue
+            if has:
+                # single reference frame per update: skip if scheduled for a later frame
+                if next_id[y, x] > frame_id:
+                    counts[y, C_SKIP_SCHEDULED] += 1
+                    continue
+            if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
+                counts[y, C_SKIP_NOT_GOOD] += 1
+                continue
+            ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
+            if not ok:
+                counts[y, C_SKIP_EPL] += 1
+                continue
+            if not has:
+                # ---------------- create
+                counts[y, C_CREATE_ATTEMPTED] += 1
+                err, rid, rvar, rlen = _line_stereo(
+                    kf,
+                    ref,
+                    kf_gx,
+                    kf_gy,
+                    float(x),
+                    float(y),
+                    epxn,
+                    epyn,
+                    0.0,
+                    1.0,
+                    max_depth_id,
+                    geo,
+                    prm,
+                    cscale,
+                    buf,
+                )
+                if err == -3.0 or err == -2.0:
+                    blacklisted[y, x] -= 1
+                    counts[y, C_BLACKLISTED] += 1
+                if err < 0 or rvar > max_var:
+                    continue
+                valid[y, x] = True
+                blacklisted[y, x] = 0
+                next_id[y, x] = 0
+                validity[y, x] = prm[P_VAL_INIT_OBS]
+                idepth[y, x] = _unzero(rid)
+                var[y, x] = rvar
+                idepth_s[y, x] = -1.0
+                var_s[y, x] = -1.0
+                counts[y, C_CREATED] += 1
+            else:
+                # ---------------- update
+                sv = math.sqrt(np.float64(var_s[y, x]))
+                ids = np.float64(idepth_s[y, x])
+                lo = ids - sv * prm[P_EPL_VAR_FAC]
+                hi = ids + sv * prm[P_EPL_VAR_FAC]
+                if lo < 0:
+                    lo = 0.0
+                if hi > max_depth_id:
+                    hi = max_depth_id
+                counts[y, C_UPDATE_ATTEMPTED] += 1
+                err, rid, rvar, rlen = _line_stereo(
+                    kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf
+                )
+                diff = rid - ids
+                if err == -1.0:
+                    counts[y, C_OOB] += 1
+                elif err == -2.0:
+                    counts[y, C_FAIL] += 1
+                    vc = validity[y, x] - prm[P_VAL_DEC]
+                    validity[y, x] = vc if vc > 0 else 0.0
+                    next_id[y, x] = 0
+                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                    var[y, x] = nv
+                    if nv > max_var:
+                        valid[y, x] = False
+                        blacklisted[y, x] -= 1
+                elif err == -3.0 or err == -4.0:
+                    counts[y, C_NOT_FOUND] += 1
+                elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_s[y, x]:
+                    counts[y, C_INCONSISTENT] += 1
+                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                    var[y, x] = nv
+                    if nv > max_var:
+                        valid[y, x] = False
+                else:
+                    counts[y, C_UPDATED] += 1
+                    id_var = var[y, x] * prm[P_SUCC_VAR_INC]
+                    wgt = rvar / (rvar + id_var)
+                    idepth[y, x] = _unzero((1.0 - wgt) * rid + wgt * idepth[y, x])
+                    id_var = id_var * wgt
+                    if id_var < var[y, x]:
+                        var[y, x] = id_var
+                    vmax = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
+                    vc = validity[y, x] + prm[P_VAL_INC]
+                    validity[y, x] = vmax if vc > vmax else vc
+                    if rlen < prm[P_MIN_EPL_CROP]:
+                        inc = skip_ratio
+                        if inc < 3.0:
+                            inc = 3.0
+                        inc += int(rlen * 10000.0) % 2
+                        if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
+                            inc *= 3.0
+                        next_id[y, x] = int(frame_id + inc)
+
+
+_observe_serial = numba.njit(**_JIT)(_observe_impl)
+_observe_parallel = numba.njit(parallel=True, **_JIT)(_observe_impl)
+
+
+def observe_numba(
+    state: tuple[np.ndarray, ...],
+    kf: np.ndarray,
+    kf_gx: np.ndarray,
+    kf_gy: np.ndarray,
+    kf_mg: np.ndarray,
+    ref: np.ndarray,
+    good: np.ndarray | None,
+    geo: np.ndarray,
+    prm: np.ndarray,
+    cscale: float,
+    frame_id: int,
+    skip_ratio: float,
+    parallel: bool = False,
+) -> np.ndarray:
+    """observeDepth over the keyframe (in place on ``state``); returns the (N_COUNTS,) int64 counters.
+
+    ``state`` = (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s). Rows are independent,
+    so ``parallel=True`` (numba prange over rows) gives byte-identical results.
+    """
+    h = state[0].shape[0]
+    counts = np.zeros((h, N_COUNTS), np.int64)
+    use_good = good is not None
+    g = good if use_good else np.ones((1, 1), np.bool_)
+    fn = _observe_parallel if parallel else _observe_serial
+    fn(
+        *state,
+        kf,
+        kf_gx,
+        kf_gy,
+        kf_mg,
+        ref,
+        g,
+        use_good,
+        geo,
+        prm,
+        float(cscale),
+        int(frame_id),
+        float(skip_ratio),
+        counts,
+    )
+    return counts.sum(axis=0)
+
+
+@numba.njit(**_JIT)
+def _regularize_kernel(
+    valid,
+    blacklisted,
+    validity,
+    idepth,
+    var,
+    idepth_s,
+    var_s,
+    valid_read,
+    remove_occlusions,
+    validity_th,
+    reg_dist_var,
+):  # pragma: no cover - compiled
+    """Row-vectorised regularisation: for each row, 25 branch-free passes (one per neighbour offset)
+    accumulate into per-column float32 buffers; then the per-pixel decisions."""
+    h, w = valid.shape
+    valid_read[:, :] = valid
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    fac = np.float32(DIFF_FAC_SMOOTHING)
+    # separate allocations (not rows of one array) so that LLVM can vectorise the passes
+    acc_s = np.empty(w, np.float32)
+    acc_i = np.empty(w, np.float32)
+    acc_v = np.empty(w, np.float32)
+    n_occ = np.empty(w, np.float32)
+    n_ok = np.empty(w, np.float32)
+    for y in range(2, h - 2):
+        for x in range(w):
+            acc_s[x] = zero
+            acc_i[x] = zero
+            acc_v[x] = zero
+            n_occ[x] = zero
+            n_ok[x] = zero
+        for dy in range(-2, 3):
+            for dx in range(-2, 3):
+                c = np.float32((dx * dx + dy * dy) * reg_dist_var)
+                for x in range(2, w - 2):
+                    vr = valid_read[y + dy, x + dx]
+                    di = idepth[y + dy, x + dx]
+                    vi = var[y + dy, x + dx]
+                    d0 = idepth[y, x]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + var[y, x]
+                    use = vr and not incons
+                    iv = one / (vi + c)
+                    acc_v[x] += validity[y + dy, x + dx] if use else zero
+                    acc_s[x] += di * iv if use else zero
+                    acc_i[x] += iv if use else zero
+                    n_occ[x] += one if (vr and incons and di > d0) else zero
+                    n_ok[x] += one if use else zero
+        for x in range(2, w - 2):
+            if not valid_read[y, x]:
+                continue
+            if acc_v[x] < validity_th:
+                valid[y, x] = False
+                blacklisted[y, x] -= 1
+                continue
+            if remove_occlusions and n_occ[x] > n_ok[x]:
+                valid[y, x] = False
+                continue
+            si = np.float64(acc_i[x])
+            idepth_s[y, x] = _unzero(np.float64(acc_s[x]) / si)
+            var_s[y, x] = 1.0 / si
+
+
+@numba.njit(**_JIT)
+def _fill_holes_kernel(
+    valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, mg, valid_read, integral, prm
+):  # pragma: no cover - compiled
+    h, w = valid.shape
+    valid_read[:, :] = valid
+    # integral image of the validity of valid pixels: integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x
+    for y in range(h):
+        row = 0.0
+        for x in range(w):
+            if valid[y, x]:
+                row += validity[y, x]
+            integral[y + 1, x + 1] = integral[y, x + 1] + row
+    min_grad = prm[P_MIN_GRAD]
+    min_bl = prm[P_MIN_BLACKLIST]
+    for y in range(3, h - 2):
+        for x in range(3, w - 2):
+            if valid_read[y, x]:
+                continue
+            if mg[y, x] < min_grad:
+                continue
+            val = integral[y + 3, x + 3] - integral[y - 2, x + 3] - integral[y + 3, x - 2] + integral[y - 2, x - 2]
+            if (blacklisted[y, x] >= min_bl and val > prm[P_VAL_SUM_CREATE]) or val > prm[P_VAL_SUM_UNBL]:
+                s = 0.0
+                sivar = 0.0
+                for yy in range(y - 2, y + 3):
+                    for xx in range(x - 2, x + 3):
+                        if not valid_read[yy, xx]:
+                            continue
+                        iv = 1.0 / np.float64(var[yy, xx])
+                        s += np.float64(idepth[yy, xx]) * iv
+                        sivar += iv
+                valid[y, x] = True
+                blacklisted[y, x] = 0
+                next_id[y, x] = 0
+                validity[y, x] = 0.0
+                idepth[y, x] = _unzero(s / sivar)
+                var[y, x] = prm[P_VAR_INIT]
+                idepth_s[y, x] = -1.0
+                var_s[y, x] = -1.0
+
+
+def regularize_numba(
+    state: tuple[np.ndarray, ...],
+    remove_occlusions: bool,
+    validity_th: float,
+    reg_dist_var: float,
+    scratch: np.ndarray | None = None,
+) -> None:
+    """``regularizeDepthMap`` (radius 2) in place on ``state`` (see :func:`regularize_reference`).
+
+    Float32 arithmetic (as LSD-SLAM); ``scratch`` is an optional (H, W) bool work array.
+    """
+    valid, blacklisted, _next_id, validity, idepth, var, idepth_s, var_s = state
+    if scratch is None:
+        scratch = np.empty(valid.shape, np.bool_)
+    _regularize_kernel(
+        valid,
+        blacklisted,
+        validity,
+        idepth,
+        var,
+        idepth_s,
+        var_s,
+        scratch,
+        bool(remove_occlusions),
+        np.float32(validity_th),
+        float(reg_dist_var),
+    )
+
+
+def fill_holes_numba(
+    state: tuple[np.ndarray, ...],
+    max_grad: np.ndarray,
+    prm: np.ndarray,
+    scratch: np.ndarray | None = None,
+    integral: np.ndarray | None = None,
+) -> None:
+    """``regularizeDepthMapFillHoles`` in place on ``state`` (see :func:`fill_holes_reference`)."""
+    h, w = state[0].shape
+    if scratch is None:
+        scratch = np.empty((h, w), np.bool_)
+    if integral is None:
+        integral = np.zeros((h + 1, w + 1), np.float64)
+    _fill_holes_kernel(*state, max_grad, scratch, integral, prm)
+
+
+@numba.njit(**_JIT)
+def _propagate_kernel(
+    valid_o,
+    idepth_o,
+    var_o,
+    idepth_s_o,
+    validity_o,
+    valid_n,
+    blacklisted_n,
+    next_n,
+    validity_n,
+    idepth_n,
+    var_n,
+    idepth_s_n,
+    var_s_n,
+    mg_new,
+    good,
+    use_good,
+    feat_old,
+    feat_new,
+    R,
+    t,
+    fx,
+    fy,
+    cx,
+    cy,
+    prm,
+    cscale,
+    counts,
+):  # pragma: no cover - compiled
+    h, w = valid_o.shape
+    nch = feat_old.shape[2]
+    fxi = 1.0 / fx
+    fyi = 1.0 / fy
+    cxi = -cx / fx
+    cyi = -cy / fy
+    min_grad = prm[P_MIN_GRAD]
+    vmax_merge = prm[P_VAL_MAX] + prm[P_VAL_MAX_VAR]
+    col = np.empty((1, nch), np.float64)
+    for y in range(h):
+        for x in range(w):
+            if not valid_o[y, x]:
+                continue
+            counts[PC_ATTEMPTS] += 1
+            d_old = np.float64(idepth_s_o[y, x])
+            rx = x * fxi + cxi
+            ry = y * fyi + cyi
+            pn0 = (R[0, 0] * rx + R[0, 1] * ry + R[0, 2]) / d_old + t[0]
+            pn1 = (R[1, 0] * rx + R[1, 1] * ry + R[1, 2]) / d_old + t[1]
+            pn2 = (R[2, 0] * rx + R[2, 1] * ry + R[2, 2]) / d_old + t[2]
+            new_idepth = 1.0 / pn2
+            u_new = pn0 * new_idepth * fx + cx
+            v_new = pn1 * new_idepth * fy + cy
+            if not (u_new > 2.1 and v_new > 2.1 and u_new < w - 3.1 and v_new < h - 3.1):
+                counts[PC_OOB] += 1
+                continue
+            nx = int(u_new + 0.5)
+            ny = int(v_new + 0.5)
+            dest_grad = mg_new[ny, nx]
+            if use_good:
+                if not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL] or dest_grad < min_grad:
+                    counts[PC_DROPPED_GOOD] += 1
+                    continue
+            else:
+                _sample(feat_new, u_new, v_new, col, 0)
+                r2 = 0.0
+                for c in range(nch):
+                    r = col[0, c] - feat_old[y, x, c]
+                    r2 += r * r
+                r2 *= cscale
+                if r2 / (MAX_DIFF_CONSTANT + MAX_DIFF_GRAD_MULT * dest_grad * dest_grad) > 1.0 or dest_grad < min_grad:
+                    counts[PC_DROPPED_GOOD] += 1
+                    continue
+            ratio = new_idepth / d_old
+            ratio *= ratio
+            ratio *= ratio
+            new_var = ratio * var_o[y, x]
+            if valid_n[ny, nx]:
+                diff = idepth_n[ny, nx] - new_idepth
+                if DIFF_FAC_PROP_MERGE * diff * diff > new_var + var_n[ny, nx]:
+                    counts[PC_OCCLUDED] += 1
+                    if new_idepth < idepth_n[ny, nx]:
+                        continue
+                    valid_n[ny, nx] = False
+            if not valid_n[ny, nx]:
+                counts[PC_CREATED] += 1
+                valid_n[ny, nx] = True
+                idepth_n[ny, nx] = new_idepth
+                var_n[ny, nx] = new_var
+                validity_n[ny, nx] = validity_o[y, x]
+            else:
+                counts[PC_MERGED] += 1
+                tv = np.float64(var_n[ny, nx])
+                wgt = new_var / (tv + new_var)
+                merged = wgt * idepth_n[ny, nx] + (1.0 - wgt) * new_idepth
+                mv = validity_o[y, x] + validity_n[ny, nx]
+                if mv > vmax_merge:
+                    mv = vmax_merge
+                idepth_n[ny, nx] = merged
+                var_n[ny, nx] = 1.0 / (1.0 / tv + 1.0 / new_var)
+                validity_n[ny, nx] = mv
+            blacklisted_n[ny, nx] = 0
+            next_n[ny, nx] = 0
+            idepth_s_n[ny, nx] = -1.0
+            var_s_n[ny, nx] = -1.0
+
+
+def propagate_numba(
+    old: tuple[np.ndarray, ...],
+    mg_new: np.ndarray,
+    good: np.ndarray | None,
+    feat_old: np.ndarray,
+    feat_new: np.ndarray,
+    T_new_old: np.ndarray,
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    prm: np.ndarray,
+    cscale: float,
+) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    """``propagateDepth``: warp the old keyframe's hypotheses into the new keyframe.
+
+    Returns the new state tuple (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s) and the
+    (N_PCOUNTS,) counters. See :func:`propagate_reference`.
+    """
+    valid_o, _bl, _nx, validity_o, idepth_o, var_o, idepth_s_o, _vs = old
+    new = empty_state(valid_o.shape)
+    counts = np.zeros(N_PCOUNTS, np.int64)
+    use_good = good is not None
+    g = good if use_good else np.ones((1, 1), np.bool_)
+    T = np.asarray(T_new_old, np.float64)
+    _propagate_kernel(
+        valid_o,
+        idepth_o,
+        var_o,
+        idepth_s_o,
+        validity_o,
+        *new,
+        mg_new,
+        g,
+        use_good,
+        feat_old,
+        feat_new,
+        np.ascontiguousarray(T[:3, :3]),
+        np.ascontiguousarray(T[:3, 3]),
+        float(fx),
+        float(fy),
+        float(cx),
+        float(cy),
+        prm,
+        float(cscale),
+        counts,
+    )
+    return new, counts
+
+
+def empty_state(shape: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """A fresh all-invalid state tuple (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s)."""
+    h, w = shape
+    return (
+        np.zeros((h, w), np.bool_),
+        np.zeros((h, w), np.int32),
+        np.zeros((h, w), np.int32),
+        np.zeros((h, w), np.float32),
+        np.zeros((h, w), np.float32),
+        np.zeros((h, w), np.float32),
+        np.full((h, w), -1.0, np.float32),
+        np.full((h, w), -1.0, np.float32),
+    )
+
+
+# ============================================================================== python / numpy references
+def _unzero_ref(v: float) -> float:
+    if v < 0.0:
+        return -1e-10 if v > -1e-10 else v
+    return 1e-10 if v < 1e-10 else v
+
+
+def bilinear_reference(img: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Vectorised bilinear sampling of an (H, W, N) image at float coordinates → (..., N) float64."""
+    xs = np.asarray(xs, np.float64)
+    ys = np.asarray(ys, np.float64)
+    ix = np.trunc(xs).astype(np.int64)
+    iy = np.trunc(ys).astype(np.int64)
+    dx = (xs - ix)[..., None]
+    dy = (ys - iy)[..., None]
+    f = img.astype(np.float64)
+    return (
+        dx * dy * f[iy + 1, ix + 1]
+        + (dy - dx * dy) * f[iy + 1, ix]
+        + (dx - dx * dy) * f[iy, ix + 1]
+        + (1.0 - dx - dy + dx * dy) * f[iy, ix]
+    )
+
+
+def epl_check_reference(
+    kf_gx: np.ndarray, kf_gy: np.ndarray, x: int, y: int, geo: np.ndarray, prm: np.ndarray, cscale: float
+) -> tuple[bool, float, float]:
+    """Reference of ``makeAndCheckEPL``: (ok, epxn, epyn)."""
+    tinv = geo[G_TINV : G_TINV + 3]
+    e = np.array([-geo[G_FX] * tinv[0] + tinv[2] * (x - geo[G_CX]), -geo[G_FY] * tinv[1] + tinv[2] * (y - geo[G_CY])])
+    if np.isnan(e).any():
+        return False, 0.0, 0.0
+    len2 = float(e @ e)
+    if len2 < prm[P_MIN_EPL_LEN2]:
+        return False, 0.0, 0.0
+    g = 2.0 * np.stack([kf_gx[y, x].astype(np.float64), kf_gy[y, x].astype(np.float64)], axis=1)  # (N, 2)
+    epl_grad2 = cscale * float(np.sum((g @ e) ** 2)) / len2
+    if epl_grad2 < prm[P_MIN_EPL_GRAD2]:
+        return False, 0.0, 0.0
+    if epl_grad2 / (cscale * float(np.sum(g * g))) < prm[P_MIN_EPL_ANGLE2]:
+        return False, 0.0, 0.0
+    e = e * (GRADIENT_SAMPLE_DIST / np.sqrt(len2))
+    return True, float(e[0]), float(e[1])
+
+
+def line_stereo_reference(
+    kf: np.ndarray,
+    ref: np.ndarray,
+    kf_gx: np.ndarray,
+    kf_gy: np.ndarray,
+    u: float,
+    v: float,
+    epxn: float,
+    epyn: float,
+    min_idepth: float,
+    prior_idepth: float,
+    max_idepth: float,
+    geo: np.ndarray,
+    prm: np.ndarray,
+    cscale: float,
+) -> tuple[float, float, float, float]:
+    """Line stereo of one keyframe pixel along its epipolar line in the reference frame (numpy reference).
+
+    Parameters
+    ----------
+    kf, ref : (H, W, N) float32
+        Keyframe and reference-frame feature maps.
+    kf_gx, kf_gy : (H, W, N) float32
+        Keyframe halved gradients.
+    u, v : float
+        Keyframe pixel.
+    epxn, epyn : float
+        Unit epipolar direction in the keyframe (from :func:`epl_check_reference`).
+    min_idepth, prior_idepth, max_idepth : float
+        Search interval and prior of the inverse depth (keyframe units).
+    geo, prm : np.ndarray
+        Stereo geometry (:func:`stereo_geometry`) and parameters (:func:`make_params`).
+    cscale : float
+        Channel reduction factor (1 = sum over channels, 1/N = mean).
+
+    Returns
+    -------
+    (err, idepth, var, epl_length)
+        err ≥ 0: matching cost (sum over the 5 samples of the squared L2 over channels, × cscale), idepth the
+        keyframe inverse depth of the match, var its variance, epl_length the uncropped search length
+        (pixels). err < 0: −1 out of bounds, −2 ambiguous, −3 error too large, −4 arithmetic failure; the
+        other values are NaN.
+    """
+    h, w = kf.shape[:2]
+    fail = (np.nan, np.nan, np.nan)
+    kinvp = np.array([geo[G_FXI] * u + geo[G_CXI], geo[G_FYI] * v + geo[G_CYI], 1.0])
+    KR = geo[G_KR : G_KR + 9].reshape(3, 3)
+    Kt = geo[G_KT : G_KT + 3]
+    pinf = KR @ kinvp
+    rescale = (pinf[2] / prior_idepth + Kt[2]) * prior_idepth
+    offs = np.array([2.0, 1.0, 0.0, -1.0, -2.0])
+    kx = u + offs * epxn * rescale
+    ky = v + offs * epyn * rescale
+    if not (kx.min() > 0 and kx.max() < w - 2 and ky.min() > 0 and ky.max() < h - 2):
+        return (-1.0, *fail)
+    if not 0.7 < rescale < 1.4:
+        return (-1.0, *fail)
+    kfv = bilinear_reference(kf, kx, ky)  # (5, N)
+
+    pclose = pinf + Kt * max_idepth
+    if pclose[2] < 0.001:
+        max_idepth = (0.001 - pinf[2]) / Kt[2]
+        pclose = pinf + Kt * max_idepth
+    pclose = pclose[:2] / pclose[2]
+    pfar = pinf + Kt * min_idepth
+    if pfar[2] < 0.001 or max_idepth < min_idepth:
+        return (-1.0, *fail)
+    pfar = pfar[:2] / pfar[2]
+    if not np.isfinite(pfar[0] + pclose[0]):
+        return (-4.0, *fail)
+    inc = pclose - pfar
+    epl_length = float(np.hypot(inc[0], inc[1]))
+    if epl_length == 0.0 or not np.isfinite(epl_length):
+        return (-4.0, *fail)
+    if epl_length > prm[P_MAX_EPL_CROP]:
+        pclose = pfar + inc * (prm[P_MAX_EPL_CROP] / epl_length)
+    inc = inc * (GRADIENT_SAMPLE_DIST / epl_length)
+    pfar = pfar - inc
+    pclose = pclose + inc
+    if epl_length < prm[P_MIN_EPL_CROP]:
+        pad = (prm[P_MIN_EPL_CROP] - epl_length) / 2.0
+        pfar = pfar - inc * pad
+        pclose = pclose + inc * pad
+    b = prm[P_BORDER]
+    lo = np.array([b, b])
+    hi = np.array([w - b, h - b])
+    if np.any(pfar <= lo) or np.any(pfar >= hi):
+        return (-1.0, *fail)
+    if np.any(pclose <= lo) or np.any(pclose >= hi):
+        # move the near point inside along the line (x first, then y), then re-test
+        # (the clamped coordinate is set exactly to the border, see the kernel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for axis in (0, 1):
+                for bound, out in ((lo[axis], pclose[axis] <= lo[axis]), (hi[axis], pclose[axis] >= hi[axis])):
+                    if out:
+                        other = 1 - axis
+                        pclose[other] += (bound - pclose[axis]) / inc[axis] * inc[other]
+                        pclose[axis] = bound
+                        break
+        if not (np.all(pclose >= lo) and np.all(pclose <= hi)) or np.hypot(*(pclose - pfar)) < 8.0:
+            return (-1.0, *fail)
+
+    # search positions: start at pFar, step inc, while still before pClose (always at least one)
+    positions = []
+    cp = pfar.copy()
+    while ((inc[0] < 0) == (cp[0] > pclose[0]) and (inc[1] < 0) == (cp[1] > pclose[1])) or not positions:
+        positions.append(cp.copy())
+        cp[0] += inc[0]
+        cp[1] += inc[1]
+    cps = np.array(positions)  # (S, 2)
+    # sample at cp + j·inc for j = +2..−2 (same order as the keyframe samples)
+    sx = cps[:, 0:1] + offs[None, :] * inc[0]
+    sy = cps[:, 1:2] + offs[None, :] * inc[1]
+    # positions of the 5 samples are cp + j·inc computed once per step (the kernel re-uses them
+    # from previous steps; the values agree up to the rounding of the accumulated position)
+    vals = bilinear_reference(ref, sx, sy)  # (S, 5, N)
+    res = vals - kfv[None]
+    cost = cscale * np.sum(res * res, axis=(1, 2))  # (S,)
+    cross = np.full(len(cost), np.nan)
+    cross[1:] = cscale * np.sum(res[1:] * res[:-1], axis=(1, 2))  # Σ e_k·e_{k−1}
+
+    ib = int(np.argmin(cost))
+    best_err = float(cost[ib])
+    masked = cost.copy()
+    masked[ib] = np.inf
+    if len(cost) > 1:
+        isec = int(np.argmin(masked))
+        second_err = float(masked[isec])
+    else:
+        isec, second_err = -1, 1e50
+    if best_err > 4.0 * prm[P_MAX_ERR]:
+        return (-3.0, *fail)
+    if abs(ib - isec) > 1 and prm[P_MIN_DIST_ERR] * best_err > second_err:
+        return (-2.0, *fail)
+
+    best = cps[ib].copy()
+    did_subpixel = False
+    if prm[P_SUBPIXEL] != 0.0 and 0 < ib < len(cost) - 1:
+        e_pre, e_post = cost[ib - 1], cost[ib + 1]
+        c_pre, c_post = cross[ib], cross[ib + 1]
+        g_pre_pre = -(e_pre - c_pre)
+        g_pre_this = best_err - c_pre
+        g_post_this = -(best_err - c_post)
+        g_post_post = e_post - c_post
+        cross_pre = (g_pre_pre < 0) != (g_pre_this < 0)
+        cross_post = (g_post_post < 0) != (g_post_this < 0)
+        between = (g_post_this < 0) != (g_pre_this < 0)
+        if not between and cross_pre and not cross_post:
+            d = g_pre_this / (g_pre_this - g_pre_pre)
+            best -= d * inc
+            best_err = best_err - 2 * d * g_pre_this - (g_pre_pre - g_pre_this) * d * d
+            did_subpixel = True
+        elif not between and not cross_pre and cross_post:
+            d = g_post_this / (g_post_this - g_post_post)
+            best += d * inc
+            best_err = best_err + 2 * d * g_post_this + (g_post_post - g_post_this) * d * d
+            did_subpixel = True
+
+    sample_dist = GRADIENT_SAMPLE_DIST * rescale
+    gal = cscale * float(np.sum(np.diff(kfv, axis=0) ** 2)) / sample_dist**2
+    if best_err > prm[P_MAX_ERR] + np.sqrt(gal) * 20.0:
+        return (-3.0, *fail)
+
+    Rm = geo[G_R : G_R + 9].reshape(3, 3)
+    t = geo[G_T : G_T + 3]
+    dots = Rm @ kinvp
+    axis = 0 if inc[0] ** 2 > inc[1] ** 2 else 1
+    fi = geo[G_FXI] if axis == 0 else geo[G_FYI]
+    ci = geo[G_CXI] if axis == 0 else geo[G_CYI]
+    old = fi * best[axis] + ci
+    nom = old * t[2] - t[axis]
+    idnew = (dots[axis] - old * dots[2]) / nom
+    alpha = inc[axis] * fi * (dots[axis] * t[2] - dots[2] * t[axis]) / (nom * nom)
+    if idnew < 0 and prm[P_ALLOW_NEG] == 0.0:
+        return (-2.0, *fail)
+
+    photo = 4.0 * prm[P_PIX_NOISE2] / (gal + DIVISION_EPS)
+    g = np.stack([kf_gx[int(v), int(u)], kf_gy[int(v), int(u)]], axis=1).astype(np.float64)  # (N, 2)
+    tau = geo[G_TRACK_FAC]
+    geo_err = (
+        tau
+        * tau
+        * cscale
+        * float(np.sum(g * g))
+        / (cscale * float(np.sum((g @ np.array([epxn, epyn])) ** 2)) + DIVISION_EPS)
+    )
+    disc = 0.05 if did_subpixel else 0.5
+    var = alpha * alpha * (disc * sample_dist**2 + geo_err + photo)
+    return best_err, float(idnew), float(var), epl_length
+
+
+def observe_reference(
+    state: tuple[np.ndarray, ...],
+    kf: np.ndarray,
+    kf_gx: np.ndarray,
+    kf_gy: np.ndarray,
+    kf_mg: np.ndarray,
+    ref: np.ndarray,
+    good: np.ndarray | None,
+    geo: np.ndarray,
+    prm: np.ndarray,
+    cscale: float,
+    frame_id: int,
+    skip_ratio: float,
+) -> np.ndarray:
+    """Plain-python reference of the observe loop (in place on ``state``); slow, for small images only."""
+    valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s = state
+    h, w = valid.shape
+    counts = np.zeros(N_COUNTS, np.int64)
+    max_id = 1.0 / prm[P_MIN_DEPTH]
+    for y in range(3, h - 3):
+        for x in range(3, w - 3):
+            has = bool(valid[y, x])
+            mg = float(kf_mg[y, x])
+            if has and mg < prm[P_MIN_GRAD]:
+                valid[y, x] = False
+                counts[C_INVALIDATED_GRAD] += 1
+                continue
+            if mg < prm[P_MIN_GRAD] or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
+                continue
+            if has and next_id[y, x] > frame_id:
+                counts[C_SKIP_SCHEDULED] += 1
+                continue
+            if good is not None and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
+                counts[C_SKIP_NOT_GOOD] += 1
+                continue
+            ok, epxn, epyn = epl_check_reference(kf_gx, kf_gy, x, y, geo, prm, cscale)
+            if not ok:
+                counts[C_SKIP_EPL] += 1
+                continue
+            if not has:
+                counts[C_CREATE_ATTEMPTED] += 1
+                err, rid, rvar, _ = line_stereo_reference(
+                    kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, 0.0, 1.0, max_id, geo, prm, cscale
+                )
+                if err in (-2.0, -3.0):
+                    blacklisted[y, x] -= 1
+                    counts[C_BLACKLISTED] += 1
+                if err < 0 or rvar > prm[P_MAX_VAR]:
+                    continue
+                valid[y, x] = True
+                blacklisted[y, x] = 0
+                next_id[y, x] = 0
+                validity[y, x] = prm[P_VAL_INIT_OBS]
+                idepth[y, x] = _unzero_ref(rid)
+                var[y, x] = rvar
+                idepth_s[y, x] = -1.0
+                var_s[y, x] = -1.0
+                counts[C_CREATED] += 1
+                continue
+            ids = float(idepth_s[y, x])
+            sv = float(np.sqrt(np.float64(var_s[y, x])))
+            lo = max(0.0, ids - sv * prm[P_EPL_VAR_FAC])
+            hi = min(max_id, ids + sv * prm[P_EPL_VAR_FAC])
+            counts[C_UPDATE_ATTEMPTED] += 1
+            err, rid, rvar, rlen = line_stereo_reference(
+                kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale
+            )
+            if err == -1.0:
+                counts[C_OOB] += 1
+            elif err == -2.0:
+                counts[C_FAIL] += 1
+                validity[y, x] = max(0.0, float(validity[y, x]) - prm[P_VAL_DEC])
+                next_id[y, x] = 0
+                nv = float(var[y, x]) * prm[P_FAIL_VAR_INC]
+                var[y, x] = nv
+                if nv > prm[P_MAX_VAR]:
+                    valid[y, x] = False
+                    blacklisted[y, x] -= 1
+            elif err in (-3.0, -4.0):
+                counts[C_NOT_FOUND] += 1
+            elif DIFF_FAC_OBSERVE * (rid - ids) ** 2 > rvar + float(var_s[y, x]):
+                counts[C_INCONSISTENT] += 1
+                nv = float(var[y, x]) * prm[P_FAIL_VAR_INC]
+                var[y, x] = nv
+                if nv > prm[P_MAX_VAR]:
+                    valid[y, x] = False
+            else:
+                counts[C_UPDATED] += 1
+                old_var = float(var[y, x])
+                id_var = old_var * prm[P_SUCC_VAR_INC]
+                wgt = rvar / (rvar + id_var)
+                idepth[y, x] = _unzero_ref((1.0 - wgt) * rid + wgt * float(idepth[y, x]))
+                var[y, x] = min(old_var, id_var * wgt)
+                cap = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
+                validity[y, x] = min(cap, float(validity[y, x]) + prm[P_VAL_INC])
+                if rlen < prm[P_MIN_EPL_CROP]:
+                    inc = max(3.0, skip_ratio) + int(rlen * 10000.0) % 2
+                    if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
+                        inc *= 3.0
+                    next_id[y, x] = int(frame_id + inc)
+    return counts
+
+
+def _shifted(a: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
+    """b[y, x] = a[y+dy, x+dx] where inside, ``fill`` outside."""
+    h, w = a.shape
+    out = np.full_like(a, fill)
+    ys = slice(max(0, -dy), min(h, h - dy))
+    xs = slice(max(0, -dx), min(w, w - dx))
+    ys2 = slice(max(0, dy), min(h, h + dy))
+    xs2 = slice(max(0, dx), min(w, w + dx))
+    out[ys, xs] = a[ys2, xs2]
+    return out
+
+
+def regularize_reference(
+    state: tuple[np.ndarray, ...], remove_occlusions: bool, validity_th: float, reg_dist_var: float
+) -> None:
+    """Vectorised numpy reference of ``regularizeDepthMap`` (radius 2), in place on ``state``.
+
+    For every valid pixel at least 2 px from the border: neighbours in the 5×5 window that are valid and
+    consistent (Δidepth² ≤ σ_n² + σ²) contribute their validity to a sum and their raw idepth with weight
+    1/(σ_n² + dist²·REG_DIST_VAR). Sum < ``validity_th`` → invalid and blacklisted −1. With
+    ``remove_occlusions``, more inconsistent closer neighbours than consistent ones → invalid. Otherwise
+    idepth_smoothed = weighted mean, var_smoothed = 1/Σw.
+    """
+    valid, blacklisted, _next_id, validity, idepth, var, idepth_s, var_s = state
+    h, w = valid.shape
+    # the consistency test in float32, as the kernel (and LSD-SLAM); the sums in float64
+    d0 = idepth.astype(np.float32)
+    v0 = var.astype(np.float32)
+    val = validity.astype(np.float64)
+    s = np.zeros((h, w))
+    sivar = np.zeros((h, w))
+    vsum = np.zeros((h, w))
+    n_occ = np.zeros((h, w), np.int64)
+    n_ok = np.zeros((h, w), np.int64)
+    fac = np.float32(DIFF_FAC_SMOOTHING)
+    for dx in range(-2, 3):
+        for dy in range(-2, 3):
+            nv = _shifted(valid, dy, dx, False)
+            nd = _shifted(d0, dy, dx, np.float32(0.0))
+            nvar = _shifted(v0, dy, dx, np.float32(1.0))
+            nval = _shifted(val, dy, dx, 0.0)
+            diff = nd - d0
+            inconsistent = fac * diff * diff > nvar + v0
+            use = nv & ~inconsistent
+            n_occ += nv & inconsistent & (nd > d0)
+            n_ok += use
+            vsum += np.where(use, nval, 0.0)
+            with np.errstate(divide="ignore"):
+                ivar = np.where(use, 1.0 / (nvar.astype(np.float64) + (dx * dx + dy * dy) * reg_dist_var), 0.0)
+            s += ivar * nd
+            sivar += ivar
+    interior = np.zeros((h, w), bool)
+    interior[2 : h - 2, 2 : w - 2] = True
+    target = valid & interior
+    drop = target & (vsum < validity_th)
+    occl = target & ~drop & (n_occ > n_ok) if remove_occlusions else np.zeros_like(target)
+    keep = target & ~drop & ~occl
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sm = s / sivar
+    sm = np.where(sm < 0, np.minimum(sm, -1e-10), np.maximum(sm, 1e-10))
+    idepth_s[keep] = sm[keep]
+    var_s[keep] = 1.0 / sivar[keep]
+    blacklisted[drop] -= 1
+    valid[drop | occl] = False
+
+
+def fill_holes_reference(state: tuple[np.ndarray, ...], max_grad: np.ndarray, prm: np.ndarray) -> None:
+    """Vectorised numpy reference of ``regularizeDepthMapFillHoles``, in place on ``state``.
+
+    Reads a copy (no cascading): an invalid pixel in [3, H−2)×[3, W−2) with maxGrad ≥ minUseGrad whose 5×5
+    validity sum (of valid pixels) exceeds ``VAL_SUM_MIN_FOR_CREATE`` (not blacklisted) or
+    ``VAL_SUM_MIN_FOR_UNBLACKLIST`` (any) becomes valid with the inverse-variance mean of its valid
+    neighbours, variance ``VAR_RANDOM_INIT_INITIAL`` and validity 0.
+    """
+    valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s = state
+    h, w = valid.shape
+    v_read = valid.copy()
+    val = np.where(v_read, validity.astype(np.float64), 0.0)
+    iv = np.where(v_read, 1.0 / np.where(v_read, var.astype(np.float64), 1.0), 0.0)
+    sd = iv * np.where(v_read, idepth.astype(np.float64), 0.0)
+    vsum = np.zeros((h, w))
+    ssum = np.zeros((h, w))
+    isum = np.zeros((h, w))
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            vsum += _shifted(val, dy, dx, 0.0)
+            ssum += _shifted(sd, dy, dx, 0.0)
+            isum += _shifted(iv, dy, dx, 0.0)
+    region = np.zeros((h, w), bool)
+    region[3 : h - 2, 3 : w - 2] = True
+    cand = region & ~v_read & (max_grad >= prm[P_MIN_GRAD])
+    ok = ((blacklisted >= prm[P_MIN_BLACKLIST]) & (vsum > prm[P_VAL_SUM_CREATE])) | (vsum > prm[P_VAL_SUM_UNBL])
+    fill = cand & ok
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = ssum / isum
+    m = np.where(m < 0, np.minimum(m, -1e-10), np.maximum(m, 1e-10))
+    valid[fill] = True
+    blacklisted[fill] = 0
+    next_id[fill] = 0
+    validity[fill] = 0.0
+    idepth[fill] = m[fill]
+    var[fill] = prm[P_VAR_INIT]
+    idepth_s[fill] = -1.0
+    var_s[fill] = -1.0
+
+
+def propagate_reference(
+    old: tuple[np.ndarray, ...],
+    mg_new: np.ndarray,
+    good: np.ndarray | None,
+    feat_old: np.ndarray,
+    feat_new: np.ndarray,
+    T_new_old: np.ndarray,
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    prm: np.ndarray,
+    cscale: float,
+) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    """Reference of ``propagateDepth`` (vectorised warp, sequential collision handling in row-major order).
+
+    Every valid old pixel is warped with its smoothed inverse depth d: X_new = R·K⁻¹(x, y, 1)/d + t; it is
+    kept if it lands in (2.1, W−3.1)×(2.1, H−3.1), and (with ``good`` flags, indexed by the old pixel at
+    level 1) the flag is set and the destination maxGrad ≥ minUseGrad — without flags, the colour test
+    |ΔF|²/(40² + 0.25·maxGrad²) ≤ 1 replaces the flag. New variance (d_new/d)⁴·σ²; a collision with an
+    inconsistent hypothesis keeps the closer one, a consistent one is fused (inverse-variance, validity
+    summed and capped).
+    """
+    valid_o, _bl, _nx, validity_o, idepth_o, var_o, idepth_s_o, _vs = old
+    h, w = valid_o.shape
+    T = np.asarray(T_new_old, np.float64)
+    ys, xs = np.nonzero(valid_o)  # row-major order
+    d = idepth_s_o[ys, xs].astype(np.float64)
+    rays = np.stack([(xs - cx) / fx, (ys - cy) / fy, np.ones(len(xs))])
+    pn = (T[:3, :3] @ rays) / d + T[:3, 3:4]
+    nid = 1.0 / pn[2]
+    un = pn[0] * nid * fx + cx
+    vn = pn[1] * nid * fy + cy
+    counts = np.zeros(N_PCOUNTS, np.int64)
+    counts[PC_ATTEMPTS] = len(xs)
+    inside = (un > 2.1) & (vn > 2.1) & (un < w - 3.1) & (vn < h - 3.1)
+    counts[PC_OOB] = int(np.sum(~inside))
+    nx = np.where(inside, np.trunc(un + 0.5), 0).astype(np.int64)
+    ny = np.where(inside, np.trunc(vn + 0.5), 0).astype(np.int64)
+    dest_grad = mg_new[ny, nx].astype(np.float64)
+    if good is not None:
+        keep = inside & good[ys >> GOOD_LEVEL, xs >> GOOD_LEVEL] & (dest_grad >= prm[P_MIN_GRAD])
+    else:
+        col = bilinear_reference(feat_new, np.where(inside, un, 3.0), np.where(inside, vn, 3.0))
+        r2 = cscale * np.sum((col - feat_old[ys, xs].astype(np.float64)) ** 2, axis=-1)
+        keep = inside & ~(r2 / (MAX_DIFF_CONSTANT + MAX_DIFF_GRAD_MULT * dest_grad**2) > 1.0)
+        keep &= dest_grad >= prm[P_MIN_GRAD]
+    counts[PC_DROPPED_GOOD] = int(np.sum(inside & ~keep))
+    new_var = (nid / d) ** 4 * var_o[ys, xs].astype(np.float64)
+    new = empty_state((h, w))
+    valid_n, blacklisted_n, next_n, validity_n, idepth_n, var_n, idepth_s_n, var_s_n = new
+    vmax = prm[P_VAL_MAX] + prm[P_VAL_MAX_VAR]
+    for i in np.nonzero(keep)[0]:
+        py, px = ny[i], nx[i]
+        if valid_n[py, px]:
+            diff = float(idepth_n[py, px]) - nid[i]
+            if DIFF_FAC_PROP_MERGE * diff * diff > new_var[i] + float(var_n[py, px]):
+                counts[PC_OCCLUDED] += 1
+                if nid[i] < idepth_n[py, px]:
+                    continue
+                valid_n[py, px] = False
+        if not valid_n[py, px]:
+            counts[PC_CREATED] += 1
+            valid_n[py, px] = True
+            idepth_n[py, px] = nid[i]
+            var_n[py, px] = new_var[i]
+            validity_n[py, px] = validity_o[ys[i], xs[i]]
+        else:
+            counts[PC_MERGED] += 1
+            tv = float(var_n[py, px])
+            wgt = new_var[i] / (tv + new_var[i])
+            idepth_n[py, px] = wgt * float(idepth_n[py, px]) + (1.0 - wgt) * nid[i]
+            var_n[py, px] = 1.0 / (1.0 / tv + 1.0 / new_var[i])
+            validity_n[py, px] = min(vmax, float(validity_o[ys[i], xs[i]]) + float(validity_n[py, px]))
+    return new, counts

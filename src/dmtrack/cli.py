@@ -321,6 +321,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a JSON list")
     p.set_defaults(func=cmd_features)
 
+    from dmtrack.datasets.cli_download import add_download_parser
+
+    add_download_parser(sub)
+
     def sampling_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--feature", required=True, help="feature name")
         p.add_argument("--feature-opt", action="append", metavar="KEY=VALUE", help="feature option (repeatable)")

@@ -7,6 +7,21 @@
 """
 
 from dmtrack.datasets.base import FileSequence, Frame, Sequence
+from dmtrack.datasets.lazyseq import LoaderSequence
 from dmtrack.datasets.registry import FORMATS, READERS, detect_format, open_sequence
+from dmtrack.datasets.undistort import CalibrationFile, UndistortedSequence, Undistorter, read_calibration_file
 
-__all__ = ["FORMATS", "READERS", "FileSequence", "Frame", "Sequence", "detect_format", "open_sequence"]
+__all__ = [
+    "FORMATS",
+    "READERS",
+    "CalibrationFile",
+    "FileSequence",
+    "Frame",
+    "LoaderSequence",
+    "Sequence",
+    "UndistortedSequence",
+    "Undistorter",
+    "detect_format",
+    "open_sequence",
+    "read_calibration_file",
+]

@@ -1,9 +1,12 @@
 """Opening a sequence by path: format detection from the folder's contents, or a forced format.
 
-Detection order (first match wins): ``7scenes`` (``frame-*.color.*``), ``kitti`` (``image_0/`` or ``image_2/``
-with ``calib.txt``/``times.txt``), ``tum-rgbd`` (``rgb.txt``), ``image-folder`` (images in the folder or in
-``images/``).  ``synthetic`` is not a folder: ``synthetic`` or ``synthetic:key=value,…`` (keys of
-:class:`~dmtrack.datasets.synthetic.SyntheticConfig`).
+Detection order (first match wins, most specific layouts first): ``7scenes`` (``frame-*.color.*``), ``kitti``
+(``image_0/`` or ``image_2/`` with ``calib.txt``/``times.txt``), ``euroc`` (``mav0/cam0/data.csv``),
+``tum-monovo`` (``camera.txt`` + ``times.txt`` + ``images.zip``/``images/``), ``tum-rgbd`` (``rgb.txt``),
+``icl-nuim`` (``associations.txt`` + ``rgb/``), ``tsukuba`` (``illumination/`` + ``groundtruth/camera_track.txt``),
+``lsd-slam`` (``cameraCalibration.cfg`` + images), ``image-folder`` (images in the folder or in ``images/``).
+A file with a video extension is a ``video``.  ``synthetic`` is not a folder: ``synthetic`` or
+``synthetic:key=value,…`` (keys of :class:`~dmtrack.datasets.synthetic.SyntheticConfig`).
 """
 
 from __future__ import annotations
@@ -13,7 +16,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from dmtrack.datasets import imagefolder, kitti, sevenscenes, tumrgbd
+from dmtrack.datasets import (
+    euroc,
+    iclnuim,
+    imagefolder,
+    kitti,
+    lsdslam,
+    sevenscenes,
+    tsukuba,
+    tum_monovo,
+    tumrgbd,
+    video,
+)
 from dmtrack.datasets.base import Sequence
 from dmtrack.datasets.intrinsics import parse_intrinsics
 from dmtrack.errors import DatasetError, InputError
@@ -33,9 +47,18 @@ READERS: dict[str, Reader] = {
     for r in (
         Reader("7scenes", sevenscenes.detect, sevenscenes.open_7scenes, "Microsoft 7-Scenes sequence folder"),
         Reader("kitti", kitti.detect, kitti.open_kitti, "KITTI odometry (sequences/NN/image_0|image_2)"),
+        Reader("euroc", euroc.detect, euroc.open_euroc, "EuRoC MAV (mav0/cam0, undistorted)"),
+        Reader("tum-monovo", tum_monovo.detect, tum_monovo.open_tum_monovo,
+               "TUM monoVO (images.zip, times.txt, camera.txt; undistorted)"),
         Reader("tum-rgbd", tumrgbd.detect, tumrgbd.open_tum_rgbd, "TUM RGB-D benchmark (rgb.txt)"),
+        Reader("icl-nuim", iclnuim.detect, iclnuim.open_iclnuim, "ICL-NUIM, TUM-compatible (associations.txt)"),
+        Reader("tsukuba", tsukuba.detect, tsukuba.open_tsukuba,
+               "New Tsukuba stereo (illumination/, groundtruth/camera_track.txt)"),
+        Reader("lsd-slam", lsdslam.detect, lsdslam.open_lsdslam,
+               "LSD-SLAM image sequence (cameraCalibration.cfg; undistorted)"),
         Reader("image-folder", imagefolder.detect, imagefolder.open_image_folder,
                "image folder (+ groundtruth.txt, times.txt, camera.txt)"),
+        Reader("video", video.detect, video.open_video, "video file (.mp4, .avi, …; OpenCV)"),
     )
 }
 FORMATS = (*READERS, "synthetic")
@@ -49,13 +72,19 @@ def detect_format(path: str | Path) -> str:
     if not p.exists():
         raise DatasetError("no such file or folder", path=p)
     if not p.is_dir():
-        raise DatasetError("a sequence is a folder (video files arrive with the datasets issue)", path=p)
+        if video.detect(p):
+            return "video"
+        raise DatasetError(
+            f"a sequence is a folder or a video file ({', '.join(video.VIDEO_EXTENSIONS)}); this is neither", path=p
+        )
     for reader in READERS.values():
         if reader.detect(p):
             return reader.name
     raise DatasetError(
         "cannot recognise the sequence format (looked for 7-Scenes frame-*.color.*, KITTI image_0/ + calib.txt, "
-        "TUM RGB-D rgb.txt, or images in the folder or images/); use --format to force one",
+        "EuRoC mav0/, TUM monoVO camera.txt + times.txt + images.zip, TUM RGB-D rgb.txt, ICL-NUIM associations.txt, "
+        "New Tsukuba illumination/ + groundtruth/, LSD-SLAM cameraCalibration.cfg, or images in the folder or "
+        "images/); use --format to force one",
         path=p,
     )
 

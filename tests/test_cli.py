@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from dmtrack.cli import main
@@ -108,3 +109,25 @@ def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sa
     assert "rgb-pca2" in capsys.readouterr().out
     reduced = get_feature("rgb-pca2")  # found in the user's PCA folder
     assert reduced.channels == 2
+
+
+def test_eval_kitti_groundtruth_against_tum_estimate(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """KITTI ground truth has no timestamps: --times gives them, so a TUM estimate can be associated."""
+    from dmtrack.io.trajectory import Trajectory, write_kitti, write_tum
+
+    n = 10
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 2, 3] = np.arange(n) * 1.2
+    poses[:, 0, 3] = 0.1 * np.arange(n) ** 2
+    times = np.arange(n) * 0.1
+    write_kitti(tmp_path / "gt.txt", Trajectory(np.arange(n), poses))
+    np.savetxt(tmp_path / "times.txt", times)
+    est = poses.copy()
+    est[:, :3, 3] *= 0.5  # monocular: scale is unknown
+    write_tum(tmp_path / "est.txt", Trajectory(times, est))
+    assert main(["eval", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt"), "--times", str(tmp_path / "times.txt"),
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["matched_poses"] == n
+    assert result["ate_rmse"] == pytest.approx(0.0, abs=1e-9)
+    assert result["rpe_trans_angle_deg_per_m"] == pytest.approx(0.0, abs=1e-6)

@@ -255,8 +255,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from dmtrack.evaluation import evaluate
     from dmtrack.io.trajectory import read_trajectory
 
-    gt = read_trajectory(args.groundtruth, args.format)
-    est = read_trajectory(args.estimate, args.format)
+    gt = read_trajectory(args.groundtruth, args.format, times=args.times)
+    est = read_trajectory(args.estimate, args.format, times=args.times)
     result = evaluate(gt, est, max_diff=args.max_diff, r_l=args.r_l, align=args.align)
     if args.json:
         print(json.dumps(result, indent=2))
@@ -361,6 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("groundtruth", help="ground-truth trajectory file")
     p.add_argument("estimate", help="estimated trajectory file")
     p.add_argument("--format", choices=("tum", "kitti"), help="file format (default: guessed from the columns)")
+    p.add_argument("--times", metavar="FILE",
+                   help="timestamps (times.txt) for KITTI-format files, which have none (default: line index)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--r-l", type=_fraction, default=1.0 / 3.0, metavar="R",
                    help="longest RPE length as a fraction of the path (default 1/3; the paper uses 1/20 for KITTI "

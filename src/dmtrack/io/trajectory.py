@@ -318,8 +318,11 @@ def read_times(path: str | Path) -> np.ndarray:
     return np.asarray(out)
 
 
-def read_trajectory(path: str | Path, format: str | None = None) -> Trajectory:
-    """Read a TUM or KITTI trajectory; ``format=None`` guesses from the number of columns (8 vs 12)."""
+def read_trajectory(path: str | Path, format: str | None = None, times: str | Path | None = None) -> Trajectory:
+    """Read a TUM or KITTI trajectory; ``format=None`` guesses from the number of columns (8 vs 12).
+
+    ``times`` (a ``times.txt``) gives KITTI-format files their timestamps; TUM files carry their own.
+    """
     path = Path(path)
     if format is None:
         data_lines = _data_lines(path) if path.is_file() else []
@@ -328,7 +331,7 @@ def read_trajectory(path: str | Path, format: str | None = None) -> Trajectory:
     if format == "tum":
         return read_tum(path)
     if format == "kitti":
-        return read_kitti(path)
+        return read_kitti(path, timestamps=times)
     raise ValueError(f"unknown trajectory format {format!r} (use 'tum' or 'kitti')")
 
 

@@ -373,6 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="alignment before ATE (default sim3: monocular scale is unknown)")
     p.add_argument("--unit", default="m", help="length unit of the ground truth, for the printout (default m)")
     p.set_defaults(func=cmd_eval)
+
+    from dmtrack.experiments.cli import add_bench_parser, add_report_parser
+
+    add_bench_parser(sub)
+    add_report_parser(sub)
     return parser
 
 

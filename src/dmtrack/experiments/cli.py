@@ -1,0 +1,263 @@
+"""The ``dmtrack bench`` and ``dmtrack report`` subcommands.
+
+``dmtrack.cli.build_parser`` adds them with :func:`add_bench_parser` and :func:`add_report_parser`; each sets
+``func`` to its command, which returns the exit status (errors are :class:`~dmtrack.errors.DmtrackError`,
+printed by ``dmtrack.cli.main`` as one line).  Nothing heavy is imported until a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+from typing import Any
+
+from dmtrack.errors import InputError
+
+__all__ = ["add_bench_parser", "add_report_parser", "cmd_bench", "cmd_report", "main"]
+
+_PCA_NAME = re.compile(r"^.+-pca[0-9]+$")
+
+
+def _r_l(text: str) -> float:
+    from dmtrack.experiments.runner import parse_r_l
+
+    try:
+        return parse_r_l(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be ≥ 0, got {v}")
+    return v
+
+
+def _usable_cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``bench`` to an ``add_subparsers()`` object; returns its parser."""
+    from dmtrack.datasets.registry import FORMATS
+
+    p = subparsers.add_parser(
+        "bench",
+        help="run every sequence × feature (in parallel, resumable) and write a report with rankings and figures",
+        description="Run the grid SEQUENCES × FEATURES into DIR/runs/<sequence>/<feature>/ (one `dmtrack run` "
+        "each), skipping runs already finished with the same settings, then write DIR/report.md, "
+        "DIR/results.csv, DIR/tables/*.csv and DIR/figures/*.png. A crashing run is recorded in its "
+        "error.json and does not stop the grid.",
+    )
+    p.add_argument(
+        "--sequences",
+        nargs="+",
+        default=[],
+        metavar="S",
+        help="sequence folders or synthetic[:key=value,...] (options below apply to all)",
+    )
+    p.add_argument(
+        "--sequences-file",
+        metavar="YAML",
+        help="YAML list of sequences with per-sequence path, name, format, intrinsics, r_l, start, "
+        "max_frames, dataset (relative paths are relative to the file)",
+    )
+    p.add_argument(
+        "--features",
+        nargs="+",
+        required=True,
+        metavar="F",
+        help="feature names (see `dmtrack features`; comma-separated also accepted)",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="bench folder (created; reused to resume)")
+    p.add_argument(
+        "--jobs",
+        type=_non_negative_int,
+        metavar="N",
+        help="runs at a time in worker processes (default: the usable CPUs; 0: serially in this process)",
+    )
+    p.add_argument(
+        "--threads-per-job",
+        type=_positive_int,
+        default=1,
+        metavar="T",
+        help="numba/OpenCV/BLAS threads per worker (default 1)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:PORT",
+        help="run on this Dask distributed scheduler instead of local processes (needs dmtrack[cluster];"
+        " DIR and the sequences must be on a filesystem shared by the workers)",
+    )
+    p.add_argument("--start", type=_non_negative_int, default=0, metavar="N", help="first frame (default 0)")
+    p.add_argument("--max-frames", type=_positive_int, metavar="N", help="process at most N frames per sequence")
+    p.add_argument("--seed", type=int, metavar="S", help="seed of the random depth initialisation (default 0)")
+    p.add_argument(
+        "--r-l", type=_r_l, metavar="R", help="RPE length ratio, e.g. 1/20 (default 1/20 for KITTI, 1/3 otherwise)"
+    )
+    p.add_argument(
+        "--format",
+        choices=FORMATS,
+        help="force the dataset format (of --sequences; default for sequences-file entries without one)",
+    )
+    p.add_argument(
+        "--intrinsics",
+        metavar="FX,FY,CX,CY",
+        help="pinhole intrinsics (of --sequences; default for sequences-file entries without them)",
+    )
+    p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one odometry parameter, e.g. --set tracker.huber_d=2 (repeatable)",
+    )
+    p.add_argument(
+        "--continue-after-loss",
+        action="store_true",
+        help="keep tracking after a loss (default: stop there, as the paper counts tracked frames)",
+    )
+    p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png (and no Figure 4)")
+    p.add_argument("--no-pointcloud", action="store_true", help="do not write pointcloud.ply")
+    p.add_argument(
+        "--skip-failed", action="store_true", help="do not run again runs that crashed before (default: run them again)"
+    )
+    p.add_argument("--no-report", action="store_true", help="only run; write the report later with `dmtrack report`")
+    p.add_argument("--no-figures", action="store_true", help="report without figures")
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="progress bar (default: only on a terminal, not under CI)",
+    )
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def add_report_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``report`` to an ``add_subparsers()`` object; returns its parser."""
+    p = subparsers.add_parser(
+        "report",
+        help="rebuild a bench folder's report.md, results.csv, tables and figures from its finished runs",
+    )
+    p.add_argument("bench_dir", metavar="DIR", help="a folder written by `dmtrack bench`")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.set_defaults(func=cmd_report)
+    return p
+
+
+def _check_features(names: list[str]) -> None:
+    from dmtrack.features.base import get_entry
+
+    for name in names:
+        if not _PCA_NAME.match(name.strip().lower()):
+            get_entry(name)  # InputError listing the known names
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from dmtrack.experiments.runner import SequenceSpec, load_sequences_file, run_bench
+
+    features = [f.strip() for item in args.features for f in item.split(",") if f.strip()]
+    _check_features(features)
+    sequences: list[SequenceSpec] = []
+    if args.sequences_file:
+        sequences += load_sequences_file(args.sequences_file)
+    sequences += [SequenceSpec(s) for s in args.sequences]
+    if not sequences:
+        raise InputError("no sequences: give --sequences S... and/or --sequences-file YAML")
+    config = None
+    if args.config:
+        from dmtrack.odometry.config import VOConfig
+
+        config = VOConfig.from_yaml(args.config)
+    overrides = list(args.set)
+    if args.continue_after_loss:
+        overrides.append("stop_on_loss=false")
+    jobs = args.jobs if args.jobs is not None else max(1, _usable_cpus() // args.threads_per_job)
+    jobs = min(jobs, len(sequences) * len(features)) if jobs > 0 else 0
+
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result = run_bench(
+        sequences, features, args.out, jobs=jobs, scheduler=args.scheduler, start=args.start,
+        max_frames=args.max_frames, seed=args.seed, r_l=args.r_l, format=args.format, intrinsics=args.intrinsics,
+        config=config, overrides=overrides, depth_images=not args.no_depth_images,
+        pointcloud=not args.no_pointcloud, threads_per_job=args.threads_per_job, skip_failed=args.skip_failed,
+        report=not args.no_report, figures=not args.no_figures, progress=args.progress, log=log,
+    )  # fmt: skip
+    statuses = [o["status"] for o in result.outcomes.values()]
+    print(
+        f"bench: {len(result.tasks)} runs — {len(result.skipped)} finished before, {len(result.executed)} run now "
+        f"({statuses.count('ok')} ok, {statuses.count('lost')} lost tracking, {statuses.count('failed')} failed)"
+    )
+    if result.report is not None:
+        print(f"report: {result.report}")
+    if result.failed:
+        print(f"dmtrack: warning: {len(result.failed)} run(s) failed: {', '.join(result.failed)} "
+              "(see their error.json)", file=sys.stderr)  # fmt: skip
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dmtrack.evaluation.report import collect_runs, write_report
+
+    root = Path(args.bench_dir)
+    if not (root / "runs").is_dir():
+        raise InputError("not a bench folder (no runs/ inside); create one with `dmtrack bench`", path=root)
+    n = len(collect_runs(root))
+    if n == 0:
+        raise InputError("no finished runs in runs/ (nothing to report)", path=root)
+
+    def log(line: str) -> None:
+        print(f"dmtrack: warning: {line}", file=sys.stderr)
+
+    out = write_report(root, figures=not args.no_figures, log=log)
+    print(f"report: {out} ({n} runs)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m dmtrack.experiments.cli bench|report …`` — the same commands without ``dmtrack.cli``."""
+    from dmtrack.errors import DmtrackError
+
+    p = argparse.ArgumentParser(prog="dmtrack", description="dmtrack bench / report")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    add_bench_parser(sub)
+    add_report_parser(sub)
+    args = p.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except DmtrackError as e:
+        print(f"dmtrack: error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("dmtrack: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

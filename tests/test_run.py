@@ -48,16 +48,27 @@ def test_run_writes_every_output(synth_run: tuple[Path, object]) -> None:
     assert (out / "config.yaml").is_file()
 
 
-def test_synthetic_accuracy(synth_run: tuple[Path, object]) -> None:
-    """On exact synthetic data the grey VO must be accurate: small ATE relative to the path."""
+def test_synthetic_accuracy(tmp_path: Path) -> None:
+    """Exact synthetic data, first keyframe's depth from the ground truth: tracking + mapping must be accurate."""
     from dmtrack.datasets import open_sequence
+    from dmtrack.odometry.config import VOConfig
 
-    _, result = synth_run
+    result = run_to_directory(SYNTH, tmp_path, config=VOConfig(init="groundtruth"), pointcloud=False,
+                              depth_images=False)
     m = result.metrics
     gt_len = open_sequence(SYNTH).groundtruth.path_length()
     assert gt_len > 0.1
-    assert m["ate_rmse"] < 0.05 * gt_len  # metres, after Sim(3) alignment
-    assert m["rpe_rot_deg_per_m"] < 20.0
+    assert m["tracked_frames"] == 24
+    assert m["ate_rmse"] < 0.01 * gt_len  # metres, after Sim(3) alignment
+    assert m["rpe_rot_deg_per_m"] < 2.0
+    assert m["ate_scale"] == pytest.approx(1.0, abs=0.05)  # metric depth at the start: metric trajectory
+
+
+def test_groundtruth_init_refuses_unregistered_depth(shared_dir: Path) -> None:
+    from dmtrack.odometry.config import VOConfig
+
+    with pytest.raises(InputError, match="not registered"):
+        track(shared_dir / "data" / "7scenes-0000-0699", config=VOConfig(init="groundtruth"), max_frames=2)
 
 
 def test_same_seed_same_bytes(synth_run: tuple[Path, object], tmp_path: Path) -> None:

@@ -15,6 +15,8 @@ import json
 import math
 import os
 import time
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +35,8 @@ from dmtrack.odometry.vo import VisualOdometry, VOResult
 #: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
 R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
 DEFAULT_R_L = 1.0 / 3.0
+#: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one).
+PREFETCH = 2
 
 
 @dataclass
@@ -46,7 +50,8 @@ class RunResult:
     frame_indices : dataset frame index of each trajectory pose.
     total_frames, tracked_frames : frames given to the odometry, frames with a pose.
     lost_at, lost_reason : first frame (dataset index) where tracking was lost, and why; ``None`` if never.
-    timings_ms : mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction), ``pyramid``,
+    timings_ms : mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction) — both measured on
+        the prefetch thread, where they overlap with the odometry of earlier frames — ``pyramid``,
         ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
     metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
     vo : the odometry's own summary.
@@ -133,22 +138,50 @@ def track(
     n_levels = config.pyramid_levels
     recompute = getattr(feat, "pyramid", "downsample") == "recompute"
 
+    init_depth = config.init == "groundtruth"
+    if init_depth:
+        if not getattr(seq, "has_depth", False):
+            raise InputError(f"init='groundtruth' needs depth images, and sequence {seq.name!r} has none")
+        if getattr(seq, "details", {}).get("depth_registered_to_colour") is False:
+            raise InputError(
+                f"init='groundtruth': the depth images of {seq.name!r} are not registered to the colour camera"
+            )
+
+    def load(i: int) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
+        # read + decode + crop + feature of frame i (runs on the prefetch thread; cv2 and the numba kernels
+        # release the GIL, so this overlaps with the odometry of the previous frame)
+        t0 = time.perf_counter()
+        frame = seq[i]
+        image = crop_image(frame.image, box)
+        t1 = time.perf_counter()
+        fmap = feat.compute_pyramid(image, n_levels) if recompute else feat.compute(image)
+        t2 = time.perf_counter()
+        depth = None
+        if init_depth and i == start:
+            if frame.depth is None:
+                raise InputError(f"init='groundtruth': frame {i} of {seq.name!r} has no depth image")
+            depth = crop_image(frame.depth, box)
+        return frame.timestamp, image, fmap, t1 - t0, t2 - t1, depth
+
     t_io = t_feat = 0.0
     frame_indices: list[int] = []
     lost_reason: str | None = None
     t_start = time.perf_counter()
     bar = _progress(stop - start, seq.name, feat.name, progress)
+    # frames are loaded by one background thread, in order, at most PREFETCH frames ahead; the odometry
+    # consumes them in order, so results are the same as loading them inline
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
+    pending: deque[Future] = deque()
+    nxt = start
     try:
         for i in range(start, stop):
-            t0 = time.perf_counter()
-            frame = seq[i]
-            image = crop_image(frame.image, box)
-            t1 = time.perf_counter()
-            fmap = feat.compute_pyramid(image, n_levels) if recompute else feat.compute(image)
-            t2 = time.perf_counter()
-            t_io += t1 - t0
-            t_feat += t2 - t1
-            res = vo.process(i, frame.timestamp, image, fmap)
+            while nxt < stop and len(pending) <= PREFETCH:
+                pending.append(pool.submit(load, nxt))
+                nxt += 1
+            timestamp, image, fmap, dt_io, dt_feat, depth = pending.popleft().result()
+            t_io += dt_io
+            t_feat += dt_feat
+            res = vo.process(i, timestamp, image, fmap, depth)
             if res.tracked:
                 frame_indices.append(i)
             if bar is not None:
@@ -159,6 +192,9 @@ def track(
             if vo.stopped:
                 break
     finally:
+        for fut in pending:
+            fut.cancel()
+        pool.shutdown(wait=True)
         vo_result = vo.finish()  # closes the sink: finished results reach disk even on an error
         if bar is not None:
             bar.close()

@@ -129,6 +129,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         config = config.with_overrides(*args.set)
     if args.continue_after_loss:
         config = config.with_overrides("stop_on_loss=false")
+    if args.init:
+        config = config.with_overrides(f"init={args.init}")
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
     from dmtrack.features import get_feature
 
@@ -309,6 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override one parameter, e.g. --set tracker.huber_d=2 (repeatable)")
     p.add_argument("--r-l", type=_fraction, metavar="R",
                    help="RPE length ratio (default 1/20 for KITTI, 1/3 otherwise; the paper uses 1/20 for Tsukuba)")
+    p.add_argument("--init", choices=("random", "groundtruth"),
+                   help="first keyframe's depth: seeded random (default, the paper) or the dataset's depth image")
     p.add_argument("--continue-after-loss", action="store_true",
                    help="keep going after a tracking loss (default: stop there, as the paper counts tracked frames)")
     p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png")

@@ -279,6 +279,26 @@ def test_parallel_observe_is_identical():
         np.testing.assert_array_equal(x, y)
 
 
+def test_parallel_update_and_keyframe_are_bit_identical():
+    """A few updates and a keyframe switch: the parallel depth map (observe, fill, regularize) equals serial."""
+    cam = _camera(96, 64)
+    kf, _ = _frame(0, cam, np.eye(4))
+    frames = [_frame(i, cam, _motion(i))[0] for i in range(1, 5)]
+    maps = []
+    for par in (False, True):
+        dm = DepthMap(parallel=par)
+        dm.initialize_random(kf, seed=3)
+        for i, fr in enumerate(frames, start=1):
+            dm.update(fr, np.linalg.inv(_motion(i)))
+        child = dm.create_keyframe(frames[-1], np.linalg.inv(_motion(4)))
+        maps.append((dm, child))
+    (a, ca), (b, cb) = maps
+    assert a.n_valid > 0 and ca.n_valid > 0
+    for x, y in zip(a.state + ca.state, b.state + cb.state, strict=True):
+        assert x.tobytes() == y.tobytes()
+    assert ca.scale_from_parent == cb.scale_from_parent
+
+
 # ================================================================================== convergence
 @pytest.mark.parametrize("seeds", [(1,), (1, 2, 3)], ids=["N=1", "N=3"])
 def test_updates_converge_to_true_inverse_depth(seeds):
@@ -350,6 +370,32 @@ def test_regularize_kernel_matches_reference(remove_occlusions):
     assert 0.2 * v.size < v.sum() < np.count_nonzero(st[0])  # some dropped, many kept
     np.testing.assert_allclose(a[6][v], b[6][v], rtol=1e-5)
     np.testing.assert_allclose(a[7][v], b[7][v], rtol=1e-5)
+
+
+@pytest.mark.parametrize("remove_occlusions", [False, True])
+def test_parallel_regularize_and_fill_holes_are_identical(remove_occlusions):
+    """The row-parallel (prange) regularize / fill-holes kernels give the serial kernels' bits."""
+    import numba
+
+    st = _random_state(48, 64, 5, density=0.5, max_validity=10)
+    mg = np.random.default_rng(1).uniform(0, 12, (48, 64)).astype(np.float32)
+    prm = dk.make_params(DepthConfig())
+    a, b = _copy(st), _copy(st)
+    dk.regularize_numba(a, remove_occlusions, 24.0, 0.075**2, parallel=False)
+    dk.regularize_numba(b, remove_occlusions, 24.0, 0.075**2, parallel=True)
+    dk.fill_holes_numba(a, mg, prm, parallel=False)
+    dk.fill_holes_numba(b, mg, prm, parallel=True)
+    prev = numba.get_num_threads()
+    c = _copy(st)
+    try:
+        numba.set_num_threads(1)  # one thread through the parallel build
+        dk.regularize_numba(c, remove_occlusions, 24.0, 0.075**2, parallel=True)
+        dk.fill_holes_numba(c, mg, prm, parallel=True)
+    finally:
+        numba.set_num_threads(prev)
+    assert (a[0] != st[0]).any()  # the passes changed something
+    for x, y, z in zip(a, b, c, strict=True):
+        assert x.tobytes() == y.tobytes() == z.tobytes()
 
 
 def test_regularize_semantics():

@@ -285,9 +285,12 @@ def test_deterministic_and_parallel_identical(grey: Pair) -> None:
     assert a.last_residual == b.last_residual
     fk, ff = grey.frames()
     ref = TrackingReference.from_keyframe(fk, *grey.depth_for(fk))
-    c = Tracker(parallel=True).track(ref, ff, np.eye(4))
-    assert c.T_fk.tobytes() == a.T_fk.tobytes() and c.last_residual == a.last_residual
-    assert c.ref_pixel_was_good.tobytes() == a.ref_pixel_was_good.tobytes()
+    # parallel kernels on every level (parallel_min_points=0), on the finest only, and on none
+    for min_pts in (0, ref.level(1).n_points, 10**9):
+        c = Tracker(parallel=True, parallel_min_points=min_pts).track(ref, ff, np.eye(4))
+        assert c.T_fk.tobytes() == a.T_fk.tobytes() and c.last_residual == a.last_residual
+        assert c.ref_pixel_was_good.tobytes() == a.ref_pixel_was_good.tobytes()
+        assert c.iterations == a.iterations and c.evaluations == a.evaluations
 
 
 def test_three_copies_of_grey_give_the_grey_pose(grey: Pair) -> None:

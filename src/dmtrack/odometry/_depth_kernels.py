@@ -28,7 +28,9 @@ Conventions
 
 from __future__ import annotations
 
+import contextlib
 import math
+import types
 
 import numba
 import numpy as np
@@ -206,6 +208,30 @@ def stereo_geometry(
 
 
 # ============================================================================== numba kernels
+def _schedule(parallel: bool):  # noqa: ANN202
+    """Context for a kernel call: dynamic scheduling (chunks of one ``prange`` iteration) for the parallel
+    builds — a thread that the OS delays does not hold the others up — and nothing for the serial ones."""
+    return numba.parallel_chunksize(1) if parallel else contextlib.nullcontext()
+
+
+def _variant(fn, suffix: str):
+    """A copy of the python function ``fn`` named ``fn.__name__ + suffix``.
+
+    numba's on-disk cache is keyed by the function's qualified name and first line, not by the compile flags:
+    a serial and a ``parallel=True`` build of the *same* function would share one cache entry, and whichever
+    was compiled first would be loaded for both (the parallel build silently running serially). Each build
+    therefore gets its own copy with its own name.
+    """
+    g = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + suffix, fn.__defaults__, fn.__closure__)
+    g.__qualname__ = fn.__qualname__ + suffix
+    g.__doc__ = fn.__doc__
+    return g
+
+
+#: Row chunks of the row-parallel kernels (observe, regularize, fill holes): chunk c takes every
+#: ROW_CHUNKS-th row starting at c. Pixels (rows) are independent, so results do not depend on it nor on the
+#: thread count; it only balances the work of ``prange``'s static schedule.
+ROW_CHUNKS = 32
 _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 # small helpers are inlined at numba-IR level: LLVM does not inline across separately compiled (cached)
 # numba functions, and a call per bilinear sample costs ~3x the sample itself
@@ -614,121 +640,124 @@ def _observe_impl(
     min_grad = prm[P_MIN_GRAD]
     max_var = prm[P_MAX_VAR]
     max_depth_id = 1.0 / prm[P_MIN_DEPTH]
-    for y in prange(3, h - 3):
+    # rows are independent; chunk c takes rows 3 + c, 3 + c + ROW_CHUNKS, … (interleaved, so that the
+    # static schedule of prange gives every thread a similar share of the textured rows)
+    for chunk in prange(ROW_CHUNKS):
         buf = np.empty((4, 5, nch), np.float64)
-        for x in range(3, w - 3):
-            has = valid[y, x]
-            mg = kf_mg[y, x]
-            if has and mg < min_grad:
-                valid[y, x] = False
-                counts[y, C_INVALIDATED_GRAD] += 1
-                continue
-            if mg < min_grad or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
-                continue
-            if has:
-                # single reference frame per update: skip if scheduled for a later frame
-                if next_id[y, x] > frame_id:
-                    counts[y, C_SKIP_SCHEDULED] += 1
+        for y in range(3 + chunk, h - 3, ROW_CHUNKS):
+            for x in range(3, w - 3):
+                has = valid[y, x]
+                mg = kf_mg[y, x]
+                if has and mg < min_grad:
+                    valid[y, x] = False
+                    counts[y, C_INVALIDATED_GRAD] += 1
                     continue
-            if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
-                counts[y, C_SKIP_NOT_GOOD] += 1
-                continue
-            ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
-            if not ok:
-                counts[y, C_SKIP_EPL] += 1
-                continue
-            if not has:
-                # ---------------- create
-                counts[y, C_CREATE_ATTEMPTED] += 1
-                err, rid, rvar, rlen = _line_stereo(
-                    kf,
-                    ref,
-                    kf_gx,
-                    kf_gy,
-                    float(x),
-                    float(y),
-                    epxn,
-                    epyn,
-                    0.0,
-                    1.0,
-                    max_depth_id,
-                    geo,
-                    prm,
-                    cscale,
-                    buf,
-                )
-                if err == -3.0 or err == -2.0:
-                    blacklisted[y, x] -= 1
-                    counts[y, C_BLACKLISTED] += 1
-                if err < 0 or rvar > max_var:
+                if mg < min_grad or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
                     continue
-                valid[y, x] = True
-                blacklisted[y, x] = 0
-                next_id[y, x] = 0
-                validity[y, x] = prm[P_VAL_INIT_OBS]
-                idepth[y, x] = _unzero(rid)
-                var[y, x] = rvar
-                idepth_s[y, x] = -1.0
-                var_s[y, x] = -1.0
-                counts[y, C_CREATED] += 1
-            else:
-                # ---------------- update
-                sv = math.sqrt(np.float64(var_s[y, x]))
-                ids = np.float64(idepth_s[y, x])
-                lo = ids - sv * prm[P_EPL_VAR_FAC]
-                hi = ids + sv * prm[P_EPL_VAR_FAC]
-                if lo < 0:
-                    lo = 0.0
-                if hi > max_depth_id:
-                    hi = max_depth_id
-                counts[y, C_UPDATE_ATTEMPTED] += 1
-                err, rid, rvar, rlen = _line_stereo(
-                    kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf
-                )
-                diff = rid - ids
-                if err == -1.0:
-                    counts[y, C_OOB] += 1
-                elif err == -2.0:
-                    counts[y, C_FAIL] += 1
-                    vc = validity[y, x] - prm[P_VAL_DEC]
-                    validity[y, x] = vc if vc > 0 else 0.0
-                    next_id[y, x] = 0
-                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
-                    var[y, x] = nv
-                    if nv > max_var:
-                        valid[y, x] = False
+                if has:
+                    # single reference frame per update: skip if scheduled for a later frame
+                    if next_id[y, x] > frame_id:
+                        counts[y, C_SKIP_SCHEDULED] += 1
+                        continue
+                if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
+                    counts[y, C_SKIP_NOT_GOOD] += 1
+                    continue
+                ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
+                if not ok:
+                    counts[y, C_SKIP_EPL] += 1
+                    continue
+                if not has:
+                    # ---------------- create
+                    counts[y, C_CREATE_ATTEMPTED] += 1
+                    err, rid, rvar, rlen = _line_stereo(
+                        kf,
+                        ref,
+                        kf_gx,
+                        kf_gy,
+                        float(x),
+                        float(y),
+                        epxn,
+                        epyn,
+                        0.0,
+                        1.0,
+                        max_depth_id,
+                        geo,
+                        prm,
+                        cscale,
+                        buf,
+                    )
+                    if err == -3.0 or err == -2.0:
                         blacklisted[y, x] -= 1
-                elif err == -3.0 or err == -4.0:
-                    counts[y, C_NOT_FOUND] += 1
-                elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_s[y, x]:
-                    counts[y, C_INCONSISTENT] += 1
-                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
-                    var[y, x] = nv
-                    if nv > max_var:
-                        valid[y, x] = False
+                        counts[y, C_BLACKLISTED] += 1
+                    if err < 0 or rvar > max_var:
+                        continue
+                    valid[y, x] = True
+                    blacklisted[y, x] = 0
+                    next_id[y, x] = 0
+                    validity[y, x] = prm[P_VAL_INIT_OBS]
+                    idepth[y, x] = _unzero(rid)
+                    var[y, x] = rvar
+                    idepth_s[y, x] = -1.0
+                    var_s[y, x] = -1.0
+                    counts[y, C_CREATED] += 1
                 else:
-                    counts[y, C_UPDATED] += 1
-                    id_var = var[y, x] * prm[P_SUCC_VAR_INC]
-                    wgt = rvar / (rvar + id_var)
-                    idepth[y, x] = _unzero((1.0 - wgt) * rid + wgt * idepth[y, x])
-                    id_var = id_var * wgt
-                    if id_var < var[y, x]:
-                        var[y, x] = id_var
-                    vmax = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
-                    vc = validity[y, x] + prm[P_VAL_INC]
-                    validity[y, x] = vmax if vc > vmax else vc
-                    if rlen < prm[P_MIN_EPL_CROP]:
-                        inc = skip_ratio
-                        if inc < 3.0:
-                            inc = 3.0
-                        inc += int(rlen * 10000.0) % 2
-                        if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
-                            inc *= 3.0
-                        next_id[y, x] = int(frame_id + inc)
+                    # ---------------- update
+                    sv = math.sqrt(np.float64(var_s[y, x]))
+                    ids = np.float64(idepth_s[y, x])
+                    lo = ids - sv * prm[P_EPL_VAR_FAC]
+                    hi = ids + sv * prm[P_EPL_VAR_FAC]
+                    if lo < 0:
+                        lo = 0.0
+                    if hi > max_depth_id:
+                        hi = max_depth_id
+                    counts[y, C_UPDATE_ATTEMPTED] += 1
+                    err, rid, rvar, rlen = _line_stereo(
+                        kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf
+                    )
+                    diff = rid - ids
+                    if err == -1.0:
+                        counts[y, C_OOB] += 1
+                    elif err == -2.0:
+                        counts[y, C_FAIL] += 1
+                        vc = validity[y, x] - prm[P_VAL_DEC]
+                        validity[y, x] = vc if vc > 0 else 0.0
+                        next_id[y, x] = 0
+                        nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                        var[y, x] = nv
+                        if nv > max_var:
+                            valid[y, x] = False
+                            blacklisted[y, x] -= 1
+                    elif err == -3.0 or err == -4.0:
+                        counts[y, C_NOT_FOUND] += 1
+                    elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_s[y, x]:
+                        counts[y, C_INCONSISTENT] += 1
+                        nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                        var[y, x] = nv
+                        if nv > max_var:
+                            valid[y, x] = False
+                    else:
+                        counts[y, C_UPDATED] += 1
+                        id_var = var[y, x] * prm[P_SUCC_VAR_INC]
+                        wgt = rvar / (rvar + id_var)
+                        idepth[y, x] = _unzero((1.0 - wgt) * rid + wgt * idepth[y, x])
+                        id_var = id_var * wgt
+                        if id_var < var[y, x]:
+                            var[y, x] = id_var
+                        vmax = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
+                        vc = validity[y, x] + prm[P_VAL_INC]
+                        validity[y, x] = vmax if vc > vmax else vc
+                        if rlen < prm[P_MIN_EPL_CROP]:
+                            inc = skip_ratio
+                            if inc < 3.0:
+                                inc = 3.0
+                            inc += int(rlen * 10000.0) % 2
+                            if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
+                                inc *= 3.0
+                            next_id[y, x] = int(frame_id + inc)
 
 
-_observe_serial = numba.njit(**_JIT)(_observe_impl)
-_observe_parallel = numba.njit(parallel=True, **_JIT)(_observe_impl)
+_observe_serial = numba.njit(**_JIT)(_variant(_observe_impl, "_serial"))
+_observe_parallel = numba.njit(parallel=True, **_JIT)(_variant(_observe_impl, "_parallel"))
 
 
 def observe_numba(
@@ -756,27 +785,27 @@ def observe_numba(
     use_good = good is not None
     g = good if use_good else np.ones((1, 1), np.bool_)
     fn = _observe_parallel if parallel else _observe_serial
-    fn(
-        *state,
-        kf,
-        kf_gx,
-        kf_gy,
-        kf_mg,
-        ref,
-        g,
-        use_good,
-        geo,
-        prm,
-        float(cscale),
-        int(frame_id),
-        float(skip_ratio),
-        counts,
-    )
+    with _schedule(parallel):
+        fn(
+            *state,
+            kf,
+            kf_gx,
+            kf_gy,
+            kf_mg,
+            ref,
+            g,
+            use_good,
+            geo,
+            prm,
+            float(cscale),
+            int(frame_id),
+            float(skip_ratio),
+            counts,
+        )
     return counts.sum(axis=0)
 
 
-@numba.njit(**_JIT)
-def _regularize_kernel(
+def _regularize_impl(
     valid,
     blacklisted,
     validity,
@@ -790,63 +819,75 @@ def _regularize_kernel(
     reg_dist_var,
 ):  # pragma: no cover - compiled
     """Row-vectorised regularisation: for each row, 25 branch-free passes (one per neighbour offset)
-    accumulate into per-column float32 buffers; then the per-pixel decisions."""
+    accumulate into per-column float32 buffers; then the per-pixel decisions. Rows only read ``valid_read``
+    (a copy of ``valid``), ``idepth``, ``var`` and ``validity``, which are not written, so rows are independent
+    (interleaved row chunks, ``prange`` in the parallel build)."""
     h, w = valid.shape
-    valid_read[:, :] = valid
+    for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
+        for x in range(w):
+            valid_read[y, x] = valid[y, x]
     one = np.float32(1.0)
     zero = np.float32(0.0)
     fac = np.float32(DIFF_FAC_SMOOTHING)
-    # separate allocations (not rows of one array) so that LLVM can vectorise the passes
-    acc_s = np.empty(w, np.float32)
-    acc_i = np.empty(w, np.float32)
-    acc_v = np.empty(w, np.float32)
-    n_occ = np.empty(w, np.float32)
-    n_ok = np.empty(w, np.float32)
-    for y in range(2, h - 2):
-        for x in range(w):
-            acc_s[x] = zero
-            acc_i[x] = zero
-            acc_v[x] = zero
-            n_occ[x] = zero
-            n_ok[x] = zero
-        for dy in range(-2, 3):
-            for dx in range(-2, 3):
-                c = np.float32((dx * dx + dy * dy) * reg_dist_var)
-                for x in range(2, w - 2):
-                    vr = valid_read[y + dy, x + dx]
-                    di = idepth[y + dy, x + dx]
-                    vi = var[y + dy, x + dx]
-                    d0 = idepth[y, x]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + var[y, x]
-                    use = vr and not incons
-                    iv = one / (vi + c)
-                    acc_v[x] += validity[y + dy, x + dx] if use else zero
-                    acc_s[x] += di * iv if use else zero
-                    acc_i[x] += iv if use else zero
-                    n_occ[x] += one if (vr and incons and di > d0) else zero
-                    n_ok[x] += one if use else zero
-        for x in range(2, w - 2):
-            if not valid_read[y, x]:
-                continue
-            if acc_v[x] < validity_th:
-                valid[y, x] = False
-                blacklisted[y, x] -= 1
-                continue
-            if remove_occlusions and n_occ[x] > n_ok[x]:
-                valid[y, x] = False
-                continue
-            si = np.float64(acc_i[x])
-            idepth_s[y, x] = _unzero(np.float64(acc_s[x]) / si)
-            var_s[y, x] = 1.0 / si
+    for chunk in prange(ROW_CHUNKS):
+        # separate allocations (not rows of one array) so that LLVM can vectorise the passes
+        acc_s = np.empty(w, np.float32)
+        acc_i = np.empty(w, np.float32)
+        acc_v = np.empty(w, np.float32)
+        n_occ = np.empty(w, np.float32)
+        n_ok = np.empty(w, np.float32)
+        for y in range(2 + chunk, h - 2, ROW_CHUNKS):
+            for x in range(w):
+                acc_s[x] = zero
+                acc_i[x] = zero
+                acc_v[x] = zero
+                n_occ[x] = zero
+                n_ok[x] = zero
+            for dy in range(-2, 3):
+                for dx in range(-2, 3):
+                    c = np.float32((dx * dx + dy * dy) * reg_dist_var)
+                    for x in range(2, w - 2):
+                        vr = valid_read[y + dy, x + dx]
+                        di = idepth[y + dy, x + dx]
+                        vi = var[y + dy, x + dx]
+                        d0 = idepth[y, x]
+                        diff = di - d0
+                        incons = fac * diff * diff > vi + var[y, x]
+                        use = vr and not incons
+                        iv = one / (vi + c)
+                        acc_v[x] += validity[y + dy, x + dx] if use else zero
+                        acc_s[x] += di * iv if use else zero
+                        acc_i[x] += iv if use else zero
+                        n_occ[x] += one if (vr and incons and di > d0) else zero
+                        n_ok[x] += one if use else zero
+            for x in range(2, w - 2):
+                if not valid_read[y, x]:
+                    continue
+                if acc_v[x] < validity_th:
+                    valid[y, x] = False
+                    blacklisted[y, x] -= 1
+                    continue
+                if remove_occlusions and n_occ[x] > n_ok[x]:
+                    valid[y, x] = False
+                    continue
+                si = np.float64(acc_i[x])
+                idepth_s[y, x] = _unzero(np.float64(acc_s[x]) / si)
+                var_s[y, x] = 1.0 / si
 
 
-@numba.njit(**_JIT)
-def _fill_holes_kernel(
+_regularize_serial = numba.njit(**_JIT)(_variant(_regularize_impl, "_serial"))
+_regularize_parallel = numba.njit(parallel=True, **_JIT)(_variant(_regularize_impl, "_parallel"))
+
+
+def _fill_holes_impl(
     valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, mg, valid_read, integral, prm
 ):  # pragma: no cover - compiled
+    """Hole filling. The integral image is sequential; the fill reads only ``valid_read`` pixels (never
+    written: only invalid pixels are filled) and the integral image, so rows are independent."""
     h, w = valid.shape
-    valid_read[:, :] = valid
+    for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
+        for x in range(w):
+            valid_read[y, x] = valid[y, x]
     # integral image of the validity of valid pixels: integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x
     for y in range(h):
         row = 0.0
@@ -856,31 +897,36 @@ def _fill_holes_kernel(
             integral[y + 1, x + 1] = integral[y, x + 1] + row
     min_grad = prm[P_MIN_GRAD]
     min_bl = prm[P_MIN_BLACKLIST]
-    for y in range(3, h - 2):
-        for x in range(3, w - 2):
-            if valid_read[y, x]:
-                continue
-            if mg[y, x] < min_grad:
-                continue
-            val = integral[y + 3, x + 3] - integral[y - 2, x + 3] - integral[y + 3, x - 2] + integral[y - 2, x - 2]
-            if (blacklisted[y, x] >= min_bl and val > prm[P_VAL_SUM_CREATE]) or val > prm[P_VAL_SUM_UNBL]:
-                s = 0.0
-                sivar = 0.0
-                for yy in range(y - 2, y + 3):
-                    for xx in range(x - 2, x + 3):
-                        if not valid_read[yy, xx]:
-                            continue
-                        iv = 1.0 / np.float64(var[yy, xx])
-                        s += np.float64(idepth[yy, xx]) * iv
-                        sivar += iv
-                valid[y, x] = True
-                blacklisted[y, x] = 0
-                next_id[y, x] = 0
-                validity[y, x] = 0.0
-                idepth[y, x] = _unzero(s / sivar)
-                var[y, x] = prm[P_VAR_INIT]
-                idepth_s[y, x] = -1.0
-                var_s[y, x] = -1.0
+    for chunk in prange(ROW_CHUNKS):
+        for y in range(3 + chunk, h - 2, ROW_CHUNKS):
+            for x in range(3, w - 2):
+                if valid_read[y, x]:
+                    continue
+                if mg[y, x] < min_grad:
+                    continue
+                val = integral[y + 3, x + 3] - integral[y - 2, x + 3] - integral[y + 3, x - 2] + integral[y - 2, x - 2]
+                if (blacklisted[y, x] >= min_bl and val > prm[P_VAL_SUM_CREATE]) or val > prm[P_VAL_SUM_UNBL]:
+                    s = 0.0
+                    sivar = 0.0
+                    for yy in range(y - 2, y + 3):
+                        for xx in range(x - 2, x + 3):
+                            if not valid_read[yy, xx]:
+                                continue
+                            iv = 1.0 / np.float64(var[yy, xx])
+                            s += np.float64(idepth[yy, xx]) * iv
+                            sivar += iv
+                    valid[y, x] = True
+                    blacklisted[y, x] = 0
+                    next_id[y, x] = 0
+                    validity[y, x] = 0.0
+                    idepth[y, x] = _unzero(s / sivar)
+                    var[y, x] = prm[P_VAR_INIT]
+                    idepth_s[y, x] = -1.0
+                    var_s[y, x] = -1.0
+
+
+_fill_holes_serial = numba.njit(**_JIT)(_variant(_fill_holes_impl, "_serial"))
+_fill_holes_parallel = numba.njit(parallel=True, **_JIT)(_variant(_fill_holes_impl, "_parallel"))
 
 
 def regularize_numba(
@@ -889,27 +935,31 @@ def regularize_numba(
     validity_th: float,
     reg_dist_var: float,
     scratch: np.ndarray | None = None,
+    parallel: bool = False,
 ) -> None:
     """``regularizeDepthMap`` (radius 2) in place on ``state`` (see :func:`regularize_reference`).
 
-    Float32 arithmetic (as LSD-SLAM); ``scratch`` is an optional (H, W) bool work array.
+    Float32 arithmetic (as LSD-SLAM); ``scratch`` is an optional (H, W) bool work array. ``parallel``: rows
+    over threads (identical results).
     """
     valid, blacklisted, _next_id, validity, idepth, var, idepth_s, var_s = state
     if scratch is None:
         scratch = np.empty(valid.shape, np.bool_)
-    _regularize_kernel(
-        valid,
-        blacklisted,
-        validity,
-        idepth,
-        var,
-        idepth_s,
-        var_s,
-        scratch,
-        bool(remove_occlusions),
-        np.float32(validity_th),
-        float(reg_dist_var),
-    )
+    fn = _regularize_parallel if parallel else _regularize_serial
+    with _schedule(parallel):
+        fn(
+            valid,
+            blacklisted,
+            validity,
+            idepth,
+            var,
+            idepth_s,
+            var_s,
+            scratch,
+            bool(remove_occlusions),
+            np.float32(validity_th),
+            float(reg_dist_var),
+        )
 
 
 def fill_holes_numba(
@@ -918,14 +968,20 @@ def fill_holes_numba(
     prm: np.ndarray,
     scratch: np.ndarray | None = None,
     integral: np.ndarray | None = None,
+    parallel: bool = False,
 ) -> None:
-    """``regularizeDepthMapFillHoles`` in place on ``state`` (see :func:`fill_holes_reference`)."""
+    """``regularizeDepthMapFillHoles`` in place on ``state`` (see :func:`fill_holes_reference`).
+
+    ``parallel``: rows of the fill over threads (identical results).
+    """
     h, w = state[0].shape
     if scratch is None:
         scratch = np.empty((h, w), np.bool_)
     if integral is None:
         integral = np.zeros((h + 1, w + 1), np.float64)
-    _fill_holes_kernel(*state, max_grad, scratch, integral, prm)
+    fn = _fill_holes_parallel if parallel else _fill_holes_serial
+    with _schedule(parallel):
+        fn(*state, max_grad, scratch, integral, prm)
 
 
 @numba.njit(**_JIT)

@@ -7,8 +7,10 @@ are per channel; the 6×6 system is accumulated on the fly from per-point 2×2 s
 (NV)×6 Jacobian never exists: ``J_c = g_cᵀ·M`` with the 2×6 projection derivative ``M`` of the point, hence
 ``A = Σ_p Mᵀ S M`` and ``b = Σ_p Mᵀ s``.
 
-All kernels are sequential (no parallel reductions), so results are bit-reproducible run to run.
-Arithmetic is float64 on float32 storage.
+Sums are formed per fixed block of :data:`BLOCK` points and combined in block order (no parallel reductions),
+so the serial and the ``prange`` kernels give bit-identical results for any thread count. Arithmetic is
+float64 on float32 storage; ``error_model="numpy"`` (a division by zero gives inf/nan — e.g. a point with
+z' = 0 fails the image test — instead of raising).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ BUF_COLS = 8
 
 
 # ============================================================================== tracking reference (§1)
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def idepth_downsample(idepth: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
     """Inverse-variance-weighted 2×2 mean of the valid (var > 0) children; none valid → (−1, −1).
 
@@ -80,7 +82,7 @@ def idepth_downsample_numpy(idepth: np.ndarray, var: np.ndarray) -> tuple[np.nda
     return out_d, out_v
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def make_points(
     idepth: np.ndarray, var: np.ndarray, feat: np.ndarray, fx: float, fy: float, cx: float, cy: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
@@ -167,7 +169,7 @@ def eval_params(
     return np.array([fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr], np.float64)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _eval_block(
     blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags, buf, part
 ):  # pragma: no cover - compiled
@@ -323,7 +325,7 @@ def _eval_block(
     part[blk, 9] = a_w
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _combine_eval(part: np.ndarray) -> tuple[int, float, int, int, float, float, float, float, float, float]:
     tot = np.zeros(_NE)
     for blk in range(part.shape[0]):
@@ -332,7 +334,7 @@ def _combine_eval(part: np.ndarray) -> tuple[int, float, int, int, float, float,
     return (int(tot[0]), tot[1], int(tot[2]), int(tot[3]), tot[4], tot[5], tot[6], tot[7], tot[8], tot[9])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def eval_pass(
     points: np.ndarray,
     ref_vals: np.ndarray,
@@ -371,7 +373,7 @@ def eval_pass(
     return _combine_eval(part)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def eval_pass_parallel(
     points: np.ndarray,
     ref_vals: np.ndarray,
@@ -491,7 +493,7 @@ def eval_pass_numpy(
 _NA = 27  # 21 upper-triangle entries of A and 6 of b
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _warp_block(blk, buf, part):  # pragma: no cover - compiled
     a00 = a01 = a02 = a03 = a04 = a05 = 0.0
     a11 = a12 = a13 = a14 = a15 = 0.0
@@ -596,7 +598,7 @@ def _warp_block(blk, buf, part):  # pragma: no cover - compiled
     p[26] = b5
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _combine_warp(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tot = np.zeros(_NA)
     for blk in range(part.shape[0]):
@@ -612,7 +614,7 @@ def _combine_warp(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return A, tot[21:27].copy()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def warp_update(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
     """Accumulate A = Σ Mᵀ S M (6×6) and b = Σ Mᵀ s (6) over the in-image rows (z' ≠ 0) of ``buf``.
 
@@ -629,7 +631,7 @@ def warp_update(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no
     return _combine_warp(part)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def warp_update_parallel(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
     """:func:`warp_update` with the blocks distributed over threads; bit-identical results."""
     nb = (buf.shape[0] + BLOCK - 1) // BLOCK
@@ -659,7 +661,7 @@ def warp_update_numpy(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ============================================================================== small linear algebra
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def solve_damped(A: np.ndarray, b: np.ndarray, lam: float) -> tuple[np.ndarray, bool]:  # pragma: no cover
     """Solve (A with its diagonal multiplied by 1+λ) x = b by an LDLᵀ factorisation (6×6, no pivoting).
 
@@ -700,7 +702,7 @@ def solve_damped(A: np.ndarray, b: np.ndarray, lam: float) -> tuple[np.ndarray, 
     return x, True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def se3_exp(xi: np.ndarray) -> np.ndarray:  # pragma: no cover
     """exp of a twist (υ, ω) (translation first) as a 4×4 float64 matrix (Sophus convention)."""
     wx = xi[3]

@@ -184,8 +184,14 @@ class VOConfig:
     """Seed of the random depth initialisation."""
     stop_on_loss: bool = True
     """Stop processing at the first tracking loss (the paper counts tracked frames until failure)."""
+    init: str = "random"
+    """How the first keyframe's depth starts: ``"random"`` (LSD-SLAM's seeded random inverse depth, the paper's
+    setting) or ``"groundtruth"`` (the dataset's depth of the first frame, as LSD-SLAM's ``gtDepthInit``:
+    variance 0.01², metric scale; needs a depth image registered to the camera)."""
 
     def __post_init__(self) -> None:
+        if self.init not in ("random", "groundtruth"):
+            raise InputError(f"init must be 'random' or 'groundtruth', not {self.init!r}")
         if self.pyramid_levels < 1:
             raise InputError("pyramid_levels must be ≥ 1")
         if max(self.tracker.levels) >= self.pyramid_levels:

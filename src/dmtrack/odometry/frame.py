@@ -198,7 +198,7 @@ def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ numba kernels
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _downsample_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
     h2, w2, n = out.shape
     for y in range(h2):
@@ -210,7 +210,7 @@ def _downsample_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no
                 out[y, x, c] = s * np.float32(0.25)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gradients_kernel(
     feat: np.ndarray, gx: np.ndarray, gy: np.ndarray, gmean: np.ndarray, max_grad: np.ndarray
 ) -> None:  # pragma: no cover - compiled

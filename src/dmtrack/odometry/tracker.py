@@ -29,6 +29,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 
 from dmtrack.errors import InputError
@@ -215,22 +216,37 @@ class Tracker:
     use_numba : bool
         Use the numba kernels (default) or the numpy references (slow; for tests).
     parallel : bool
-        Distribute the point blocks of the numba kernels over threads (``prange``). The partial sums are
-        formed per fixed block and combined in order, so results are bit-identical to ``parallel=False``.
+        Distribute the point blocks of the numba kernels over threads (``prange``) on levels with at least
+        ``parallel_min_points`` reference points (coarser levels have too few blocks to gain from threads). The
+        partial sums are formed per fixed block and combined in order, so results are bit-identical to
+        ``parallel=False``, whatever the thread count.
+    parallel_min_points : int
+        See ``parallel``.
     """
 
-    def __init__(self, config: TrackerConfig | None = None, use_numba: bool = True, parallel: bool = False):
+    def __init__(
+        self,
+        config: TrackerConfig | None = None,
+        use_numba: bool = True,
+        parallel: bool = False,
+        parallel_min_points: int = 4 * K.BLOCK,
+    ):
         self.config = config if config is not None else TrackerConfig()
         self.use_numba = use_numba
         self.parallel = parallel
+        self.parallel_min_points = int(parallel_min_points)
         self._eval_fn: Any
         self._update_fn: Any
         if not use_numba:
             self._eval_fn, self._update_fn = K.eval_pass_numpy, K.warp_update_numpy
-        elif parallel:
-            self._eval_fn, self._update_fn = K.eval_pass_parallel, K.warp_update_parallel
         else:
             self._eval_fn, self._update_fn = K.eval_pass, K.warp_update
+
+    def _kernels(self, n_points: int) -> tuple[Any, Any]:
+        """(evaluation, normal-equation) functions for a level with ``n_points`` reference points."""
+        if self.use_numba and self.parallel and n_points >= self.parallel_min_points:
+            return K.eval_pass_parallel, K.warp_update_parallel
+        return self._eval_fn, self._update_fn
 
     # ------------------------------------------------------------------ one evaluation
     def _evaluate(
@@ -244,6 +260,7 @@ class Tracker:
         write_flags: bool,
         buf: np.ndarray,
         ch_scale: float,
+        eval_fn: Any = None,
     ) -> _Eval:
         cfg = self.config
         cam = frame_level.camera
@@ -261,7 +278,8 @@ class Tracker:
             cfg.good_grad_weight**2,
             cfg.affine_huber,
         )
-        n_in, err, good, bad, usage, sxx, syy, sx, sy, sw = self._eval_fn(
+        fn = self._eval_fn if eval_fn is None else eval_fn
+        n_in, err, good, bad, usage, sxx, syy, sx, sy, sw = fn(
             rl.points,
             rl.values,
             rl.variances,
@@ -301,6 +319,14 @@ class Tracker:
             If the frame and keyframe differ in size, channel count or pyramid depth, or Gray-A is requested
             for a multichannel feature.
         """
+        if not (self.parallel and self.use_numba):
+            return self._track(reference, frame, T_fk_init)
+        # dynamic scheduling of the point blocks (chunks of one block): a thread that the OS delays does not
+        # hold the others up at every one of the many small parallel regions (results do not depend on it)
+        with numba.parallel_chunksize(1):
+            return self._track(reference, frame, T_fk_init)
+
+    def _track(self, reference: TrackingReference, frame: Frame, T_fk_init: np.ndarray) -> TrackResult:
         cfg = self.config
         kf = reference.keyframe
         if frame.n_channels != kf.n_channels:
@@ -353,8 +379,9 @@ class Tracker:
             write = lvl == min_level
             thr = cfg.min_inlier_fraction * fl.width * fl.height
             bufs = [np.empty((rl.n_points, K.BUF_COLS)), np.empty((rl.n_points, K.BUF_COLS))]
+            eval_fn, update_fn = self._kernels(rl.n_points)
             cur = 0
-            ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale)
+            ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale, eval_fn)
             evaluations[lvl] = 1
             iterations[lvl] = 0
             last = ev
@@ -367,7 +394,7 @@ class Tracker:
             max_its = cfg.max_its[lvl]
             it = 0
             while it < max_its:
-                A, bvec = self._update_fn(bufs[cur])
+                A, bvec = update_fn(bufs[cur])
                 A = A / ev.n_in * ch_scale
                 bvec = bvec / ev.n_in * ch_scale
                 iterations[lvl] += 1
@@ -376,7 +403,7 @@ class Tracker:
                     inc = self._solve(A, bvec, lam)
                     inc_try += 1
                     T_new = K.se3_exp(inc) @ T
-                    trial = self._evaluate(rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale)
+                    trial = self._evaluate(rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale, eval_fn)
                     evaluations[lvl] += 1
                     last = trial
                     if trial.n_in < thr:

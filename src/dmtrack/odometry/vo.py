@@ -16,6 +16,13 @@ Per frame (:meth:`VisualOdometry.process`):
    S_w,new = S_w,old · Sim3(T_fk⁻¹, ρ) with ρ the new map's mean-inverse-depth normalisation;
    otherwise the frame is mapped into the keyframe (:meth:`DepthMap.update`).
 
+Threads: tracking and mapping stay strictly sequential (frame i is mapped before frame i+1 is tracked, as
+LSD-SLAM with single-threaded mapping); inside them the numba kernels can use several threads (``parallel``,
+``threads``): the tracker's point blocks and the depth map's pixel rows are independent and every sum is
+formed per fixed block and combined in order, so the results are byte-identical for any thread count. On a
+machine whose cores are busy with other work, one thread (``threads=1`` or ``NUMBA_NUM_THREADS=1``) can be
+faster.
+
 Frame poses: T_wc = S_wk · T_fk⁻¹ reduced to SE(3) (rotation without the scale, translation in world units);
 the world unit is the first keyframe's (mean inverse depth 1), up to the drift of the monocular scale.
 """
@@ -26,8 +33,10 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 
+from dmtrack.errors import InputError
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import Frame, build_frame
@@ -96,6 +105,8 @@ class FrameResult:
     pyramid_ms, tracking_ms, mapping_ms : float
         Wall time of the feature pyramid, of tracking (reference rebuild + LM) and of mapping (depth update or
         keyframe creation / initialisation), milliseconds.
+    reference_ms : float
+        The part of ``tracking_ms`` spent (re)building the tracking reference (0 when it was reused).
     """
 
     index: int
@@ -109,6 +120,7 @@ class FrameResult:
     pyramid_ms: float = 0.0
     tracking_ms: float = 0.0
     mapping_ms: float = 0.0
+    reference_ms: float = 0.0
 
 
 @dataclass
@@ -165,8 +177,19 @@ class VisualOdometry:
         Receives poses, keyframes and losses as they happen.
     use_numba : bool
         Numba kernels (default) or numpy references (slow; tests only).
-    parallel : bool
-        Multi-threaded numba kernels in the tracker and the depth map (results are identical to serial).
+    parallel : bool, optional
+        Multi-threaded numba kernels in the tracker (levels with enough points) and the depth map (observe,
+        fill holes, regularize). Results are bit-identical to serial, whatever the thread count. Default: on
+        when more than one numba thread is used.
+    threads : int, optional
+        Numba threads for this odometry's kernels (set around every :meth:`process` / :meth:`finish` call and
+        restored afterwards); default: numba's current setting (``NUMBA_NUM_THREADS``, the core count, or
+        what ``numba.set_num_threads`` set in the calling thread).
+
+    Raises
+    ------
+    InputError
+        If ``threads`` is not in 1 … ``numba.config.NUMBA_NUM_THREADS``.
     """
 
     def __init__(
@@ -175,14 +198,21 @@ class VisualOdometry:
         config: VOConfig | None = None,
         sink: OutputSink | None = None,
         use_numba: bool = True,
-        parallel: bool = False,
+        parallel: bool | None = None,
+        threads: int | None = None,
     ):
+        if threads is not None and not 1 <= int(threads) <= numba.config.NUMBA_NUM_THREADS:
+            raise InputError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS}, got {threads}")
+        self.threads = None if threads is None else int(threads)
+        if parallel is None:
+            n_threads = self.threads if self.threads is not None else numba.get_num_threads()
+            parallel = use_numba and n_threads > 1
         self.camera = camera
         self.config = config if config is not None else VOConfig()
         self.sink = sink
         self.use_numba = use_numba
-        self.parallel = parallel
-        self.tracker = Tracker(self.config.tracker, use_numba=use_numba, parallel=parallel)
+        self.parallel = bool(parallel)
+        self.tracker = Tracker(self.config.tracker, use_numba=use_numba, parallel=self.parallel)
         self._levels = tuple(self.config.tracker.levels)
         # state of the current keyframe
         self._kf: Frame | None = None
@@ -225,7 +255,32 @@ class VisualOdometry:
         return self._stopped_at is not None
 
     # ------------------------------------------------------------------ main loop
-    def process(self, index: int, timestamp: float, image: np.ndarray | None, feature_map: np.ndarray) -> FrameResult:
+    def process(
+        self,
+        index: int,
+        timestamp: float,
+        image: np.ndarray | None,
+        feature_map: np.ndarray,
+        depth: np.ndarray | None = None,
+    ) -> FrameResult:
+        """Process one frame (see :meth:`_process`; runs with ``threads`` numba threads if given)."""
+        if self.threads is None:
+            return self._process(index, timestamp, image, feature_map, depth)
+        prev = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            return self._process(index, timestamp, image, feature_map, depth)
+        finally:
+            numba.set_num_threads(prev)
+
+    def _process(
+        self,
+        index: int,
+        timestamp: float,
+        image: np.ndarray | None,
+        feature_map: np.ndarray,
+        depth: np.ndarray | None = None,
+    ) -> FrameResult:
         """Process one frame.
 
         Parameters
@@ -238,6 +293,8 @@ class VisualOdometry:
             Source uint8 image (grey or RGB), kept with keyframes for point-cloud colours.
         feature_map : np.ndarray
             (H, W, N) (or (H, W)) float feature map, grey = 0..255.
+        depth : np.ndarray, optional
+            (H, W) true depth (0 or NaN = unknown) of the first frame, used with ``config.init = "groundtruth"``.
 
         Raises
         ------
@@ -262,7 +319,7 @@ class VisualOdometry:
         self._t_sum["pyramid"] += pyramid_ms
 
         if self._kf is None:
-            return self._initialize(frame, pyramid_ms)
+            return self._initialize(frame, pyramid_ms, depth)
 
         assert self._dm is not None
         # ---- tracking
@@ -270,6 +327,7 @@ class VisualOdometry:
         if self._ref is None:
             idepth, var = self._dm.tracking_depth()
             self._ref = TrackingReference.from_keyframe(self._kf, idepth, var, self._levels, self.use_numba)
+        reference_ms = 1e3 * (time.perf_counter() - t1)
         res = self.tracker.track(self._ref, frame, self._T_fk_last)
         t2 = time.perf_counter()
         tracking_ms = 1e3 * (t2 - t1)
@@ -288,7 +346,10 @@ class VisualOdometry:
                 self.sink.on_lost(int(index), str(reason))
             if self.config.stop_on_loss:
                 self._stopped_at = int(index)
-            return FrameResult(index, timestamp, None, False, False, self._kf_id, reason, res, pyramid_ms, tracking_ms)
+            return FrameResult(
+                index, timestamp, None, False, False, self._kf_id, reason, res, pyramid_ms, tracking_ms,
+                reference_ms=reference_ms,
+            )  # fmt: skip
 
         T_fk = res.T_fk
         T_wc = _se3_part(self._S_wk @ _inv_se3(T_fk), self._s_wk)
@@ -312,13 +373,22 @@ class VisualOdometry:
         mapping_ms = 1e3 * (time.perf_counter() - t3)
         self._t_sum["mapping"] += mapping_ms
         return FrameResult(
-            index, timestamp, T_wc, True, new_kf, self._kf_id, None, res, pyramid_ms, tracking_ms, mapping_ms
-        )
+            index, timestamp, T_wc, True, new_kf, self._kf_id, None, res, pyramid_ms, tracking_ms, mapping_ms,
+            reference_ms,
+        )  # fmt: skip
 
-    def _initialize(self, frame: Frame, pyramid_ms: float) -> FrameResult:
+    def _initialize(self, frame: Frame, pyramid_ms: float, depth: np.ndarray | None = None) -> FrameResult:
         t0 = time.perf_counter()
         dm = DepthMap(self.config.depth, use_numba=self.use_numba, parallel=self.parallel)
-        dm.initialize_random(frame, self.config.seed)
+        if self.config.init == "groundtruth":
+            if depth is None:
+                raise InputError("init='groundtruth' needs the first frame's depth image")
+            d = np.asarray(depth, dtype=np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                idepth = np.where(np.isfinite(d) & (d > 0), 1.0 / d, np.nan)
+            dm.initialize_from_depth(frame, idepth)
+        else:
+            dm.initialize_random(frame, self.config.seed)
         self._kf, self._dm = frame, dm
         self._kf_id = 0
         self._S_wk = np.eye(4)
@@ -385,7 +455,13 @@ class VisualOdometry:
         if not self._finished:
             self._finished = True
             if self._dm is not None and self._kf is not None:
-                self._dm.finalize()
+                prev = numba.get_num_threads()
+                if self.threads is not None:
+                    numba.set_num_threads(self.threads)
+                try:
+                    self._dm.finalize()
+                finally:
+                    numba.set_num_threads(prev)
                 self._emit_keyframe(self._kf_id, self._kf, self._dm)
             if self.sink is not None:
                 self.sink.close()

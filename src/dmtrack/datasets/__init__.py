@@ -6,8 +6,7 @@
 ((480, 640, 3), (4, 4))
 """
 
-from dmtrack.datasets.base import FileSequence, Frame, Sequence
-from dmtrack.datasets.lazyseq import LoaderSequence
+from dmtrack.datasets.base import FileSequence, Frame, LoaderSequence, Sequence
 from dmtrack.datasets.registry import FORMATS, READERS, detect_format, open_sequence
 from dmtrack.datasets.undistort import CalibrationFile, UndistortedSequence, Undistorter, read_calibration_file
 

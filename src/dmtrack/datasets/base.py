@@ -13,7 +13,7 @@ Readers deliver images at their native size; the odometry crops them to multiple
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from collections.abc import Sequence as _Seq
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,7 +79,157 @@ class Sequence(Protocol):
     def __iter__(self) -> Iterator[Frame]: ...
 
 
-class FileSequence:
+ImageLoader = Callable[[int], np.ndarray]
+DepthLoader = Callable[[int], "np.ndarray | None"]
+
+
+class LoaderSequence:
+    """Frames produced on demand by ``load_image(i)`` (and optionally ``load_depth(i)``).
+
+    Parameters
+    ----------
+    name, format : shown by ``dmtrack info``.
+    root : the file or folder the sequence was opened from.
+    load_image : ``i -> uint8 (H, W) or (H, W, 3) RGB`` for ``0 <= i < N`` (indices of the *full* sequence).
+    timestamps : (N,) float64 seconds.
+    camera : pinhole intrinsics of the delivered images, or ``None``.
+    size : ``(width, height)`` of the delivered images.
+    poses : (N, 4, 4) ground-truth ``T_wc`` (NaN-filled where unknown) or ``None``.
+    load_depth : ``i -> float32 metres`` or ``None``.
+    paths : per-frame source paths (for ``Frame.path``), or ``None``.
+    details : facts shown by ``dmtrack info``.
+    indices : the frames of the underlying source this sequence exposes (used by :meth:`slice`).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        format: str,
+        root: Path,
+        load_image: ImageLoader,
+        timestamps: np.ndarray,
+        camera: PinholeCamera | None,
+        size: tuple[int, int],
+        poses: np.ndarray | None = None,
+        load_depth: DepthLoader | None = None,
+        paths: list[Path | None] | None = None,
+        details: dict[str, Any] | None = None,
+        indices: np.ndarray | None = None,
+    ) -> None:
+        timestamps = np.asarray(timestamps, dtype=np.float64).reshape(-1)
+        n_src = timestamps.shape[0]
+        if indices is None:
+            indices = np.arange(n_src)
+        if indices.size == 0:
+            raise DatasetError("no frames", path=root)
+        if poses is not None and poses.shape != (n_src, 4, 4):
+            raise DatasetError(f"{n_src} frames but {poses.shape[0]} poses", path=root)
+        if paths is not None and len(paths) != n_src:
+            raise DatasetError(f"{n_src} frames but {len(paths)} paths", path=root)
+        self.name = name
+        self.format = format
+        self.root = Path(root)
+        self.camera = camera
+        self.details: dict[str, Any] = dict(details or {})
+        self._load_image = load_image
+        self._load_depth = load_depth
+        self._all_timestamps = timestamps
+        self._all_poses = poses
+        self._paths = paths
+        self._indices = np.asarray(indices, dtype=np.int64)
+        self._size = (int(size[0]), int(size[1]))
+
+    # -- protocol -------------------------------------------------------------------------------
+    @property
+    def width(self) -> int:
+        return self._size[0]
+
+    @property
+    def height(self) -> int:
+        return self._size[1]
+
+    @property
+    def timestamps(self) -> np.ndarray:
+        return self._all_timestamps[self._indices]
+
+    @property
+    def poses(self) -> np.ndarray | None:
+        """(N, 4, 4) ground truth per frame (NaN where unknown), or ``None``."""
+        return None if self._all_poses is None else self._all_poses[self._indices]
+
+    @property
+    def image_paths(self) -> list[Path | None]:
+        if self._paths is None:
+            return [None] * len(self)
+        return [self._paths[i] for i in self._indices]
+
+    @property
+    def has_depth(self) -> bool:
+        return self._load_depth is not None
+
+    @property
+    def has_groundtruth(self) -> bool:
+        poses = self.poses
+        return poses is not None and bool(np.isfinite(poses[:, 0, 0]).any())
+
+    @property
+    def groundtruth(self) -> Trajectory | None:
+        if not self.has_groundtruth:
+            return None
+        poses = self.poses
+        assert poses is not None
+        ok = np.isfinite(poses).all(axis=(1, 2))
+        return Trajectory(self.timestamps[ok], poses[ok])
+
+    def __len__(self) -> int:
+        return int(self._indices.size)
+
+    def __getitem__(self, index: int) -> Frame:
+        n = len(self)
+        if not -n <= index < n:
+            raise IndexError(f"frame {index} out of range for a sequence of {n} frames")
+        index %= n
+        src = int(self._indices[index])
+        image = self._load_image(src)
+        if image.shape[1] != self.width or image.shape[0] != self.height:
+            raise DatasetError(
+                f"frame {src} is {image.shape[1]}x{image.shape[0]}, the sequence is {self.width}x{self.height}",
+                path=self._paths[src] if self._paths is not None and self._paths[src] is not None else self.root,
+            )
+        pose = None
+        if self._all_poses is not None and np.isfinite(self._all_poses[src]).all():
+            pose = self._all_poses[src].copy()
+        depth = None if self._load_depth is None else self._load_depth(src)
+        path = None if self._paths is None else self._paths[src]
+        return Frame(index, float(self._all_timestamps[src]), image, pose, depth, path)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self[i]
+
+    def slice(self, start: int = 0, stop: int | None = None) -> LoaderSequence:
+        """Frames ``start:stop`` as a new sequence (indices restart at 0)."""
+        n = len(self)
+        stop = n if stop is None else min(stop, n)
+        if not 0 <= start < n:
+            raise DatasetError(f"start frame {start} is outside the sequence (0..{n - 1})", path=self.root)
+        if stop <= start:
+            raise DatasetError(f"empty frame range {start}:{stop}", path=self.root)
+        out = LoaderSequence(
+            self.name, self.format, self.root, self._load_image, self._all_timestamps, self.camera, self._size,
+            self._all_poses, self._load_depth, self._paths, {**self.details, "slice": [start, stop]},
+            self._indices[start:stop],
+        )
+        return out
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(name={self.name!r}, format={self.format!r}, frames={len(self)}, "
+            f"size={self.width}x{self.height}, groundtruth={self.has_groundtruth})"
+        )
+
+
+class FileSequence(LoaderSequence):
     """A sequence backed by one image file per frame (the common case for every file-based reader).
 
     Parameters
@@ -93,6 +243,8 @@ class FileSequence:
     depth_paths : per-frame depth PNGs (``None`` entries allowed), or ``None``.
     depth_scale : metres per depth-PNG unit (e.g. 1/1000 for millimetres, 1/5000 for TUM RGB-D).
     depth_invalid : PNG values meaning "no depth" besides 0 (7-Scenes uses 65535).
+    depth_reader : reads one depth file into float32 metres, replacing the 16-bit PNG reading (e.g. New
+        Tsukuba's OpenCV-XML depth maps); ``depth_scale``/``depth_invalid`` are then unused.
     grey : read images as grey (True), colour (False) or as stored (None).
     size : (width, height) if known without reading an image; else the first image is read once.
     details : further facts about the sequence shown by ``dmtrack info`` (e.g. where the intrinsics
@@ -114,123 +266,34 @@ class FileSequence:
         grey: bool | None = None,
         size: tuple[int, int] | None = None,
         details: dict[str, Any] | None = None,
+        depth_reader: Callable[[Path], np.ndarray] | None = None,
     ) -> None:
-        if len(image_paths) == 0:
+        paths = list(image_paths)
+        if not paths:
             raise DatasetError("no images found", path=root)
         timestamps = np.asarray(timestamps, dtype=np.float64)
-        if timestamps.shape != (len(image_paths),):
-            raise DatasetError(
-                f"{len(image_paths)} images but {timestamps.shape[0]} timestamps", path=root
-            )
-        if poses is not None and poses.shape != (len(image_paths), 4, 4):
-            raise DatasetError(f"{len(image_paths)} images but {poses.shape[0]} poses", path=root)
-        if depth_paths is not None and len(depth_paths) != len(image_paths):
-            raise DatasetError(f"{len(image_paths)} images but {len(depth_paths)} depth maps", path=root)
-        self.name = name
-        self.format = format
-        self.root = Path(root)
-        self.camera = camera
-        self._paths = list(image_paths)
-        self._timestamps = timestamps
-        self._poses = poses
-        self._depth_paths = None if depth_paths is None else list(depth_paths)
-        self._depth_scale = depth_scale
-        self._depth_invalid = depth_invalid
-        self._grey = grey
-        self.details: dict[str, Any] = dict(details or {})
+        if timestamps.shape != (len(paths),):
+            raise DatasetError(f"{len(paths)} images but {timestamps.shape[0]} timestamps", path=root)
+        depths = None if depth_paths is None else list(depth_paths)
+        if depths is not None and len(depths) != len(paths):
+            raise DatasetError(f"{len(paths)} images but {len(depths)} depth maps", path=root)
         if size is None and camera is not None:
             size = (camera.width, camera.height)
         if size is None:
-            first = read_image(self._paths[0], grey=self._grey)
+            first = read_image(paths[0], grey=grey)
             size = (first.shape[1], first.shape[0])
-        self._size = (int(size[0]), int(size[1]))
 
-    # -- protocol -------------------------------------------------------------------------------
-    @property
-    def width(self) -> int:
-        return self._size[0]
+        def load_image(i: int) -> np.ndarray:
+            return read_image(paths[i], grey=grey)
 
-    @property
-    def height(self) -> int:
-        return self._size[1]
+        def load_depth(i: int) -> np.ndarray | None:
+            p = depths[i] if depths is not None else None
+            if p is None:
+                return None
+            return depth_reader(p) if depth_reader is not None else read_depth_png(p, depth_scale, depth_invalid)
 
-    @property
-    def timestamps(self) -> np.ndarray:
-        return self._timestamps
-
-    @property
-    def image_paths(self) -> list[Path]:
-        return list(self._paths)
-
-    @property
-    def has_depth(self) -> bool:
-        return self._depth_paths is not None and any(p is not None for p in self._depth_paths)
-
-    @property
-    def has_groundtruth(self) -> bool:
-        return self._poses is not None and bool(np.isfinite(self._poses[:, 0, 0]).any())
-
-    @property
-    def groundtruth(self) -> Trajectory | None:
-        """Ground truth of the frames that have it, stamped with the frames' timestamps."""
-        if not self.has_groundtruth:
-            return None
-        assert self._poses is not None
-        ok = np.isfinite(self._poses).all(axis=(1, 2))
-        return Trajectory(self._timestamps[ok], self._poses[ok])
-
-    def __len__(self) -> int:
-        return len(self._paths)
-
-    def __getitem__(self, index: int) -> Frame:
-        n = len(self._paths)
-        if not -n <= index < n:
-            raise IndexError(f"frame {index} out of range for a sequence of {n} frames")
-        index %= n
-        image = read_image(self._paths[index], grey=self._grey)
-        if image.shape[1] != self.width or image.shape[0] != self.height:
-            raise DatasetError(
-                f"image is {image.shape[1]}x{image.shape[0]}, the sequence is {self.width}x{self.height}",
-                path=self._paths[index],
-            )
-        pose = None
-        if self._poses is not None and np.isfinite(self._poses[index]).all():
-            pose = self._poses[index].copy()
-        depth = None
-        if self._depth_paths is not None and self._depth_paths[index] is not None:
-            depth = read_depth_png(self._depth_paths[index], self._depth_scale, self._depth_invalid)
-        return Frame(index, float(self._timestamps[index]), image, pose, depth, self._paths[index])
-
-    def __iter__(self) -> Iterator[Frame]:
-        for i in range(len(self)):
-            yield self[i]
-
-    def slice(self, start: int = 0, stop: int | None = None) -> FileSequence:
-        """Frames ``start:stop`` as a new sequence (indices restart at 0)."""
-        n = len(self)
-        stop = n if stop is None else min(stop, n)
-        if not 0 <= start < n:
-            raise DatasetError(f"start frame {start} is outside the sequence (0..{n - 1})", path=self.root)
-        if stop <= start:
-            raise DatasetError(f"empty frame range {start}:{stop}", path=self.root)
-        return FileSequence(
-            self.name,
-            self.format,
-            self.root,
-            self._paths[start:stop],
-            self._timestamps[start:stop],
-            self.camera,
-            None if self._poses is None else self._poses[start:stop],
-            None if self._depth_paths is None else self._depth_paths[start:stop],
-            self._depth_scale,
-            self._depth_invalid,
-            self._grey,
-            self._size,
-            {**self.details, "slice": [start, stop]},
-        )
-
-    def __repr__(self) -> str:
-        return (
-            f"{type(self).__name__}(name={self.name!r}, format={self.format!r}, frames={len(self)}, "
-            f"size={self.width}x{self.height}, groundtruth={self.has_groundtruth})"
+        has_depth = depths is not None and any(p is not None for p in depths)
+        super().__init__(
+            name, format, root, load_image, timestamps, camera, size, poses,
+            load_depth if has_depth else None, paths, details,
         )

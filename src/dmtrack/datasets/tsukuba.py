@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import re
+from functools import partial
 from pathlib import Path
 from typing import Literal
 
@@ -145,49 +146,12 @@ def _read_depth_xml(path: Path, scale: float) -> np.ndarray:
     return (mat.astype(np.float32) * np.float32(scale)).reshape(mat.shape[:2])
 
 
-class TsukubaSequence(FileSequence):
-    """FileSequence with depth read from the dataset's OpenCV-XML depth maps."""
-
-    def __init__(self, *args, depth_xml: list[Path | None] | None = None, depth_unit_scale: float = 1.0,
-                 **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self._depth_xml = depth_xml
-        self._depth_unit_scale = depth_unit_scale
-
-    @property
-    def has_depth(self) -> bool:
-        return self._depth_xml is not None and any(p is not None for p in self._depth_xml)
-
-    def __getitem__(self, index: int):  # noqa: ANN204
-        frame = super().__getitem__(index)
-        if self._depth_xml is None:
-            return frame
-        p = self._depth_xml[index % len(self)]
-        if p is None:
-            return frame
-        from dataclasses import replace
-
-        return replace(frame, depth=_read_depth_xml(p, self._depth_unit_scale))
-
-    def slice(self, start: int = 0, stop: int | None = None) -> TsukubaSequence:
-        base = super().slice(start, stop)
-        n = len(self)
-        stop_ = n if stop is None else min(stop, n)
-        out = TsukubaSequence(
-            base.name, base.format, base.root, base.image_paths, base.timestamps, base.camera,
-            base._poses, None, grey=base._grey, size=(base.width, base.height), details=base.details,
-            depth_xml=None if self._depth_xml is None else self._depth_xml[start:stop_],
-            depth_unit_scale=self._depth_unit_scale,
-        )
-        return out
-
-
 def open_tsukuba(
     path: str | Path,
     illumination: str = "daylight",
     camera: Literal["left", "right"] = "left",
     units: Literal["m", "cm"] = "m",
-) -> TsukubaSequence:
+) -> FileSequence:
     """Open the New Tsukuba dataset (its root, ``illumination/<mode>`` or ``illumination/<mode>/<side>``).
 
     Parameters
@@ -241,7 +205,7 @@ def open_tsukuba(
         depth_xml = [d if d.is_file() else None for d in depth_xml]
         if not any(d is not None for d in depth_xml):
             depth_xml = None
-    return TsukubaSequence(
+    return FileSequence(
         f"tsukuba-{illumination}-{camera}",
         FORMAT,
         folder,
@@ -259,6 +223,6 @@ def open_tsukuba(
             "groundtruth": "camera_track.txt: T = [Rz(C)Ry(B)Rx(A)·F | F·XYZ], F = diag(1,-1,-1), "
                            f"shifted {offset:+g} cm along the camera x axis",
         },
-        depth_xml=depth_xml,
-        depth_unit_scale=scale,
+        depth_paths=depth_xml,
+        depth_reader=partial(_read_depth_xml, scale=scale),
     )

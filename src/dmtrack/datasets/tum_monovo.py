@@ -38,7 +38,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dmtrack.datasets.lazyseq import LoaderSequence
+from dmtrack.datasets.base import LoaderSequence
 from dmtrack.datasets.undistort import Undistorter, read_calibration_file
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.lie import quaternion_to_matrix

@@ -20,8 +20,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from dmtrack.datasets.base import LoaderSequence
 from dmtrack.datasets.intrinsics import read_intrinsics_file
-from dmtrack.datasets.lazyseq import LoaderSequence
 from dmtrack.datasets.undistort import UndistortedSequence, read_calibration_file, undistort_sequence
 from dmtrack.errors import DatasetError, InputError
 

@@ -43,14 +43,7 @@ sequences:
     dataset: KITTI
 YAML
 
-# `dmtrack bench` once the subcommand is wired into dmtrack.cli; the same command through its module otherwise
-if "$PYTHON" -m dmtrack.cli bench --help >/dev/null 2>&1; then
-  CMD=("$PYTHON" -m dmtrack.cli bench)
-else
-  CMD=("$PYTHON" -m dmtrack.experiments.cli bench)
-fi
-
-exec "${CMD[@]}" \
+exec "$PYTHON" -m dmtrack.cli bench \
   --sequences-file "$OUT/sequences.yaml" \
   --features gray gray-affine bitplanes dsift \
   --out "$OUT" \

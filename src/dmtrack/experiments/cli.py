@@ -15,7 +15,7 @@ from typing import Any
 
 from dmtrack.errors import InputError
 
-__all__ = ["add_bench_parser", "add_report_parser", "cmd_bench", "cmd_report", "main"]
+__all__ = ["add_bench_parser", "add_report_parser", "cmd_bench", "cmd_report"]
 
 _PCA_NAME = re.compile(r"^.+-pca[0-9]+$")
 
@@ -237,27 +237,3 @@ def cmd_report(args: argparse.Namespace) -> int:
     out = write_report(root, figures=not args.no_figures, log=log)
     print(f"report: {out} ({n} runs)")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m dmtrack.experiments.cli bench|report …`` — the same commands without ``dmtrack.cli``."""
-    from dmtrack.errors import DmtrackError
-
-    p = argparse.ArgumentParser(prog="dmtrack", description="dmtrack bench / report")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-    add_bench_parser(sub)
-    add_report_parser(sub)
-    args = p.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except DmtrackError as e:
-        print(f"dmtrack: error: {e}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("dmtrack: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

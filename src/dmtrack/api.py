@@ -164,8 +164,6 @@ def track(
         return frame.timestamp, image, fmap, t1 - t0, t2 - t1, depth
 
     t_io = t_feat = 0.0
-    frame_indices: list[int] = []
-    lost_reason: str | None = None
     t_start = time.perf_counter()
     bar = _progress(stop - start, seq.name, feat.name, progress)
     # frames are loaded by one background thread, in order, at most PREFETCH frames ahead; the odometry
@@ -181,14 +179,10 @@ def track(
             timestamp, image, fmap, dt_io, dt_feat, depth = pending.popleft().result()
             t_io += dt_io
             t_feat += dt_feat
-            res = vo.process(i, timestamp, image, fmap, depth)
-            if res.tracked:
-                frame_indices.append(i)
+            vo.process(i, timestamp, image, fmap, depth)
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"kf {vo.n_keyframes}", refresh=False)
-            if res.lost_reason is not None and lost_reason is None:
-                lost_reason = res.lost_reason
             if vo.stopped:
                 break
     finally:
@@ -218,11 +212,11 @@ def track(
     result = RunResult(
         trajectory=traj,
         keyframes=kfs,
-        frame_indices=np.asarray(frame_indices, dtype=np.int64),
+        frame_indices=vo_result.indices,
         total_frames=stop - start,
         tracked_frames=vo_result.tracked_frames,
         lost_at=vo_result.lost_at,
-        lost_reason=lost_reason if vo_result.lost_at is not None else None,
+        lost_reason=vo_result.lost[0][1] if vo_result.lost else None,
         timings_ms=timings,
         vo=vo_result,
     )

@@ -352,3 +352,56 @@ def test_limit_threads_leaves_numbas_pool_size_alone_once_imported(monkeypatch: 
     finally:
         numba.set_num_threads(nb_threads)
         cv2.setNumThreads(cv_threads)
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc; Linux)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    stat = Path(f"/proc/{pid}/stat")
+    try:
+        return stat.read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to find the worker processes")
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGKILL"])
+def test_killing_a_bench_stops_its_workers(tmp_path: Path, signame: str) -> None:
+    """`kill` (SIGTERM) or `kill -9` of a running bench: no worker goes on computing into DIR; resuming works."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "dmtrack.cli", "bench", "--sequences", "synthetic:n_frames=400,width=320,height=240",
+           "--features", "gray", "--out", str(out), "--jobs", "2", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "runs").glob("*/.*tmp-*")):  # a worker has started its run
+            assert proc.poll() is None and time.monotonic() < deadline, "the bench did not start a run"
+            time.sleep(0.2)
+        workers = [p for p in _children(proc.pid) if p != proc.pid]
+        assert workers, "no worker process found"
+        proc.send_signal(getattr(signal, signame))
+        proc.wait(timeout=30)
+        deadline = time.monotonic() + 15
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(w) for w in workers), "a worker outlived the bench"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert not list((out / "runs").glob("*/*/metrics.json"))  # nothing finished, nothing half-written

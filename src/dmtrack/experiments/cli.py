@@ -174,8 +174,20 @@ def _check_features(names: list[str]) -> None:
             get_entry(name)  # InputError listing the known names
 
 
+def _sigterm_as_interrupt() -> None:
+    """``kill PID`` of a bench must clean up like Ctrl-C: stop the workers, leave no half-written run."""
+    import signal
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, handler)
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from dmtrack.experiments.runner import SequenceSpec, load_sequences_file, run_bench
+
+    _sigterm_as_interrupt()
 
     features = [f.strip() for item in args.features for f in item.split(",") if f.strip()]
     _check_features(features)

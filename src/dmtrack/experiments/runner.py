@@ -566,11 +566,35 @@ def limit_threads(threads: int | None) -> None:
         pass
 
 
-def _init_worker(threads: int) -> None:
-    """Process-pool initializer: runs in each fresh worker before any task (and before numba is imported)."""
+def _init_worker(threads: int, parent_pid: int | None = None) -> None:
+    """Process-pool initializer: runs in each fresh worker before any task (and before numba is imported).
+
+    With ``parent_pid``, a daemon thread ends the worker as soon as its parent is gone (a bench killed with
+    SIGKILL, or whose pool was torn down): an orphaned worker must not go on computing and writing into DIR.
+    """
     for var in THREAD_ENV_VARS:
         os.environ[var] = str(max(1, int(threads)))
     os.environ.setdefault("MPLBACKEND", "Agg")
+    if parent_pid is not None:
+        import threading
+
+        def watch() -> None:
+            while os.getppid() == parent_pid:
+                time.sleep(0.5)
+            os._exit(1)
+
+        threading.Thread(target=watch, name="dmtrack-parent-watch", daemon=True).start()
+
+
+def _terminate_pool(pool: Any) -> None:
+    """Stop a ProcessPoolExecutor now: cancel what is queued and kill the workers mid-run."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())  # private, but the only handle on them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(timeout=5)
 
 
 class _ProgressSink:
@@ -834,7 +858,7 @@ def run_tasks_processes(
             if pool is None:
                 pool = ProcessPoolExecutor(
                     max_workers=max(1, min(jobs, len(queue) + len(retry) + len(in_flight))),
-                    mp_context=ctx, initializer=_init_worker, initargs=(threads_per_job,),
+                    mp_context=ctx, initializer=_init_worker, initargs=(threads_per_job, os.getpid()),
                 )  # fmt: skip
             if retry:
                 if not in_flight:  # a retried run runs alone: if its worker dies again, it is the culprit
@@ -862,9 +886,9 @@ def run_tasks_processes(
                     _retry_or_fail(in_flight.pop(fut), attempts, retry, on_done)
                 pool.shutdown(wait=True, cancel_futures=True)
                 pool = None
-    except BaseException:
+    except BaseException:  # Ctrl-C, SIGTERM (see run_bench): no worker may outlive the bench
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            _terminate_pool(pool)
             pool = None
         raise
     finally:

@@ -19,7 +19,7 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 $(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[dev,learned]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,learned]" "kornia>=0.7"  # kornia: DISK cross-check only; torch stays pinned
 	touch $(VENV)/.installed $@
 
 demo: $(VENV)/.installed

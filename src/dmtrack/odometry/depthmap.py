@@ -102,24 +102,12 @@ class DepthMap:
         self.parallel = bool(parallel)
         self._prm = dk.make_params(self.config)
         self.keyframe: Frame | None = None
-        shape = (0, 0)
-        (
-            self.valid,
-            self.blacklisted,
-            self.next_stereo_frame_min_id,
-            self.validity_counter,
-            self.idepth,
-            self.idepth_var,
-            self.idepth_smoothed,
-            self.idepth_var_smoothed,
-        ) = dk.empty_state(shape)
+        self._set_state(dk.empty_state((0, 0)))
         self.n_updates = 0
         self.scale_from_parent = 1.0
         self.T_new_old: np.ndarray | None = None
         self.last_counts: dict[str, int] = {}
         self.timings_ms: dict[str, float] = {}
-        self._scratch_bool: np.ndarray | None = None
-        self._scratch_int: np.ndarray | None = None
 
     # ------------------------------------------------------------------------------------------ state
     @property

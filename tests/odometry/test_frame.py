@@ -14,6 +14,8 @@ from dmtrack.odometry.frame import (
     downsample_numpy,
     gradients,
     gradients_numpy,
+    pack,
+    pack_numpy,
 )
 
 
@@ -28,6 +30,19 @@ def test_gradients_numba_equals_numpy(n: int) -> None:
     for a, b in zip(gradients(f), gradients_numpy(f), strict=True):
         assert a.dtype == np.float32 and b.dtype == np.float32
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("n", [1, 3, 8])
+def test_pack_numba_equals_numpy_and_gradients(n: int) -> None:
+    """The tracker's (h, w, 3, N) layout: values, then the x- and y-gradients of :func:`gradients_numpy`."""
+    f = _random_feat(24, 40, n, seed=20 + n)
+    p = pack(f)
+    assert p.shape == (24, 40, 3, n) and p.dtype == np.float32 and p.flags.c_contiguous
+    np.testing.assert_array_equal(p, pack_numpy(f))
+    gx, gy, _ = gradients_numpy(f)
+    np.testing.assert_array_equal(p[:, :, 0], f)
+    np.testing.assert_array_equal(p[:, :, 1], gx)
+    np.testing.assert_array_equal(p[:, :, 2], gy)
 
 
 @pytest.mark.parametrize("n", [1, 4])
@@ -98,10 +113,10 @@ def test_build_frame_pyramid_and_cameras() -> None:
         assert c.cy == pytest.approx((23.5 + 0.5) / 2**lv - 0.5)
         assert (c.width, c.height) == (64 >> lv, 48 >> lv)
         packed = level.packed
-        assert packed.shape == (48 >> lv, 64 >> lv, 2, 3)
-        np.testing.assert_array_equal(packed[..., 0], level.feat)
-        np.testing.assert_array_equal(packed[..., 1], level.gx)
-        np.testing.assert_array_equal(packed[..., 2], level.gy)
+        assert packed.shape == (48 >> lv, 64 >> lv, 3, 2)
+        np.testing.assert_array_equal(packed[:, :, 0], level.feat)
+        np.testing.assert_array_equal(packed[:, :, 1], level.gx)
+        np.testing.assert_array_equal(packed[:, :, 2], level.gy)
     # the numpy path builds the same frame
     fr2 = build_frame(5, 0.25, image, feat, cam, n_levels=4, use_numba=False)
     for a, b in zip(fr.levels, fr2.levels, strict=True):

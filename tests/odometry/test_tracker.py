@@ -158,15 +158,18 @@ def _eval_args(pair: Pair, lvl: int, T: np.ndarray, copies: int = 1, affine_sums
     flags = np.ones(fl.width * fl.height, bool)
     buf = np.zeros((rl.n_points, K.BUF_COLS))
     prm = K.eval_params(c.fx, c.fy, c.cx, c.cy, 1.1, -3.0, 1.0, 16.0, 1.5, 1600.0, 0.25, 5.0)
-    args = [rl.points, rl.values, rl.variances, rl.pixel_index, fl.packed, T, prm, affine_sums, flags, True, buf]
+    nch = rl.values.shape[1]
+    packed = fl.packed if (affine_sums or nch == 1) else np.zeros((1, 1, 3, nch), np.float32)  # placeholder
+    args = [rl.points, rl.values, rl.variances, rl.pixel_index, fl.feat, packed, T, prm, affine_sums, flags, True, buf]
     return args, rl, fl
 
 
-@pytest.mark.parametrize("copies", [1, 3])
-def test_eval_pass_numba_equals_numpy(copies: int) -> None:
+@pytest.mark.parametrize("copies,affine_sums", [(1, True), (1, False), (3, True), (3, False), (16, False)])
+def test_eval_pass_numba_equals_numpy(copies: int, affine_sums: bool) -> None:
+    """Grey and multichannel; N > 1 without affine sums takes the vectorised (fast-math) channel loop."""
     pair = Pair(n_extra=1)
     T = SE3.exp(0.5 * MOTION).matrix() @ np.linalg.inv(SE3.exp(np.r_[0.3, 0, 0, 0, 0, 0]).matrix())
-    args, rl, _ = _eval_args(pair, 1, T, copies)
+    args, rl, _ = _eval_args(pair, 1, T, copies, affine_sums)
     args2 = list(args)
     args2[-3] = args[-3].copy()
     args2[-1] = args[-1].copy()
@@ -179,10 +182,14 @@ def test_eval_pass_numba_equals_numpy(copies: int) -> None:
     n_in = out_nb[0]
     assert 0 < n_in < rl.n_points  # the shifted pose pushes some points out of the image
     assert out_nb[0] == out_np[0] and out_nb[2] == out_np[2] and out_nb[3] == out_np[3]
-    np.testing.assert_allclose(out_nb[1:], out_np[1:], rtol=1e-9)
+    # N > 1 without affine sums runs the float32 vectorised channel loop: float32 rounding, else float64
+    fast = args[1].shape[1] > 1 and not affine_sums
+    rtol = 2e-5 if fast else 1e-9
+    np.testing.assert_allclose(out_nb[1:], out_np[1:], rtol=rtol)
     np.testing.assert_array_equal(args[-3], args2[-3])  # flags
     assert not args[-3].all()
-    np.testing.assert_allclose(args[-1], args2[-1], rtol=1e-9, atol=1e-12)
+    atol = rtol * np.abs(args2[-1]).max(axis=0) if fast else 1e-12
+    assert np.all(np.abs(args[-1] - args2[-1]) <= atol + rtol * np.abs(args2[-1]))
     assert np.count_nonzero(args[-1][:, 2]) == n_in  # z' = 0 marks the points outside the image
     # the parallel kernel is bit-identical to the serial one
     assert out_par == out_nb
@@ -191,8 +198,8 @@ def test_eval_pass_numba_equals_numpy(copies: int) -> None:
     Ap, bp = K.warp_update_parallel(args[-1])
     assert A.tobytes() == Ap.tobytes() and b.tobytes() == bp.tobytes()
     An, bn = K.warp_update_numpy(args2[-1])
-    np.testing.assert_allclose(A, An, rtol=1e-9)
-    np.testing.assert_allclose(b, bn, rtol=1e-9, atol=1e-9 * np.abs(bn).max())
+    np.testing.assert_allclose(A, An, rtol=rtol, atol=rtol * np.abs(An).max() if fast else 0)
+    np.testing.assert_allclose(b, bn, rtol=rtol, atol=rtol * np.abs(bn).max())
 
 
 def test_warp_update_numba_equals_numpy_and_explicit_jacobian() -> None:
@@ -294,15 +301,16 @@ def test_deterministic_and_parallel_identical(grey: Pair) -> None:
 
 
 def test_three_copies_of_grey_give_the_grey_pose(grey: Pair) -> None:
+    # N = 3 runs the float32 vectorised channel loop (grey the float64 scalar one): equal up to float32 rounding
     one = track(grey)
     three = track(grey, copies=3)
-    np.testing.assert_allclose(three.T_fk, one.T_fk, atol=1e-9)
+    np.testing.assert_allclose(three.T_fk, one.T_fk, atol=1e-6)
     assert three.iterations == one.iterations
-    assert three.last_residual == pytest.approx(3 * one.last_residual, rel=1e-9)
+    assert three.last_residual == pytest.approx(3 * one.last_residual, rel=1e-6)
     assert (three.good_count, three.bad_count) == (one.good_count, one.bad_count)
     mean = track(grey, TrackerConfig(channel_weight="mean"), copies=3)
-    np.testing.assert_allclose(mean.T_fk, one.T_fk, atol=1e-9)
-    assert mean.last_residual == pytest.approx(one.last_residual, rel=1e-9)
+    np.testing.assert_allclose(mean.T_fk, one.T_fk, atol=1e-6)
+    assert mean.last_residual == pytest.approx(one.last_residual, rel=1e-6)
 
 
 def test_genuinely_multichannel() -> None:

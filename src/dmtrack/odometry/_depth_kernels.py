@@ -268,6 +268,78 @@ def _sample(img, x, y, out, row):  # pragma: no cover - compiled
         )
 
 
+#: fast-math flags of the multichannel channel loops (re-association lets LLVM vectorise the channel sums); no
+#: nnan/ninf. Only N > 1 takes these paths, so grey keeps the scalar arithmetic of the reference. The order of the
+#: vectorised sums is fixed at compile time: deterministic on a given machine, equal to the reference up to
+#: rounding.
+_FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
+_JIT_FAST = {**_JIT, "fastmath": _FASTMATH}
+
+
+@numba.njit(**_JIT_FAST)
+def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
+    """(Σ_c ((2 gx_c, 2 gy_c)·ep)², Σ_c |2 ∇F_c|²) of one keyframe pixel (N > 1)."""
+    dot2 = 0.0
+    g2 = 0.0
+    for c in range(gxs.shape[0]):
+        gx = 2.0 * gxs[c]
+        gy = 2.0 * gys[c]
+        d = gx * epx + gy * epy
+        dot2 += d * d
+        g2 += gx * gx + gy * gy
+    return dot2, g2
+
+
+@numba.njit(**_JIT_FAST)
+def _kf_norms(kfv):  # pragma: no cover - compiled
+    """Squared norms of the five keyframe samples (rows of ``kfv``, N > 1)."""
+    n0 = n1 = n2 = n3 = n4 = 0.0
+    for c in range(kfv.shape[1]):
+        n0 += kfv[0, c] * kfv[0, c]
+        n1 += kfv[1, c] * kfv[1, c]
+        n2 += kfv[2, c] * kfv[2, c]
+        n3 += kfv[3, c] * kfv[3, c]
+        n4 += kfv[4, c] * kfv[4, c]
+    return n0, n1, n2, n3, n4
+
+
+@numba.njit(**_JIT_FAST)
+def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - compiled
+    """Bilinear sample s of all channels at (x, y) into ``ring[row]`` and its statistics into ``st[row]``:
+    (‖s‖², ⟨s, k_0⟩ … ⟨s, k_4⟩, ⟨s, ring[prow]⟩) with k_j the keyframe samples (N > 1).
+
+    With them every 5-sample SSD of the search and its cross term with the previous step are sums of
+    scalars (see :func:`_line_stereo`): one pass over the N channels per search step instead of five.
+    """
+    ix = int(x)
+    iy = int(y)
+    dx = x - ix
+    dy = y - iy
+    dxdy = dx * dy
+    w11 = dxdy
+    w01 = dy - dxdy
+    w10 = dx - dxdy
+    w00 = 1.0 - dx - dy + dxdy
+    nrm = d0 = d1 = d2 = d3 = d4 = ss = 0.0
+    for c in range(img.shape[2]):
+        v = w11 * img[iy + 1, ix + 1, c] + w01 * img[iy + 1, ix, c] + w10 * img[iy, ix + 1, c] + w00 * img[iy, ix, c]
+        ring[row, c] = v
+        nrm += v * v
+        d0 += v * kfv[0, c]
+        d1 += v * kfv[1, c]
+        d2 += v * kfv[2, c]
+        d3 += v * kfv[3, c]
+        d4 += v * kfv[4, c]
+        ss += v * ring[prow, c]
+    st[row, 0] = nrm
+    st[row, 1] = d0
+    st[row, 2] = d1
+    st[row, 3] = d2
+    st[row, 4] = d3
+    st[row, 5] = d4
+    st[row, 6] = ss
+
+
 @numba.njit(**_JIT_INLINE)
 def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - compiled
     """``makeAndCheckEPL``: returns (ok, epxn, epyn) with the unit epipolar direction in the keyframe."""
@@ -278,14 +350,14 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
     len2 = epx * epx + epy * epy
     if len2 < prm[P_MIN_EPL_LEN2]:
         return False, 0.0, 0.0
-    dot2 = 0.0
-    g2 = 0.0
-    for c in range(kf_gx.shape[2]):
-        gx = 2.0 * kf_gx[y, x, c]
-        gy = 2.0 * kf_gy[y, x, c]
+    if kf_gx.shape[2] == 1:
+        gx = 2.0 * kf_gx[y, x, 0]
+        gy = 2.0 * kf_gy[y, x, 0]
         d = gx * epx + gy * epy
-        dot2 += d * d
-        g2 += gx * gx + gy * gy
+        dot2 = d * d
+        g2 = gx * gx + gy * gy
+    else:
+        dot2, g2 = _epl_sums(kf_gx[y, x], kf_gy[y, x], epx, epy)
     epl_grad2 = cscale * dot2 / len2
     if epl_grad2 < prm[P_MIN_EPL_GRAD2]:
         return False, 0.0, 0.0
@@ -297,21 +369,20 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
 
 @numba.njit(**_JIT_INLINE)
 def _line_stereo(
-    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf
+    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf, st
 ):  # pragma: no cover - compiled
     """LSD-SLAM ``doLineStereo`` for N channels.
 
-    ``buf`` is a (4, 5, N) float64 scratch array. Returns (err, idepth, var, epl_length): err ≥ 0 is the
+    ``buf`` is a (2, 6, N) float64 scratch array (keyframe samples, reference ring), ``st`` a (6, 7) float64
+    one (per-sample statistics, N > 1). Returns (err, idepth, var, epl_length): err ≥ 0 is the
     matching cost on success; −1 out of bounds, −2 ambiguous / failed, −3 error too large, −4 arithmetic.
     """
     h = kf.shape[0]
     w = kf.shape[1]
     nch = kf.shape[2]
     nan = np.nan
-    kfv = buf[0]  # keyframe samples, rows: p2, p1, 0, m1, m2
-    ring = buf[1]  # reference-frame samples around the current search position
-    e_cur = buf[2]  # residuals of this step and of the previous one (for the cross terms)
-    e_prev = buf[3]
+    kfv = buf[0]  # keyframe samples, rows: p2, p1, 0, m1, m2 (rows 0..4)
+    ring = buf[1]  # reference-frame samples around the current search position (6 rows, see below)
 
     kx = geo[G_FXI] * u + geo[G_CXI]
     ky = geo[G_FYI] * v + geo[G_CYI]
@@ -420,13 +491,26 @@ def _line_stereo(
     # offset 2 − j from cp (j = 0: +2 … j = 4: −2), the same order as the keyframe samples kfv.
     cpx = pfar_x
     cpy = pfar_y
+    # grey: rows 1..4 hold offsets +1..−2 and row 0 the newest sample. N > 1: the sample s_t taken at step t
+    # (offset +2 of that step; s_−1 … s_−4 are the offsets +1 … −2 of step 0) lives in ring row t mod 6 with its
+    # statistics in st (see _sample_stats); at step L the window holds s_L … s_{L−4} (row j of the keyframe
+    # samples pairs with s_{L−j}), so with k_j the keyframe samples
+    #   SSD   = Σ_j ‖s_{L−j}‖² − 2⟨s_{L−j}, k_j⟩ + ‖k_j‖²
+    #   cross = Σ_j ⟨s_{L−j}, s_{L−j−1}⟩ − ⟨s_{L−j}, k_j⟩ − ⟨s_{L−j−1}, k_j⟩ + ‖k_j‖²
+    # (the same sums as Σ_j ‖s_{L−j} − k_j‖² and Σ_j ⟨s_{L−j} − k_j, s_{L−j−1} − k_j⟩, in float64)
     win = ring
-    _sample(ref, cpx + incx, cpy + incy, win, 1)
-    _sample(ref, cpx, cpy, win, 2)
-    _sample(ref, cpx - incx, cpy - incy, win, 3)
-    _sample(ref, cpx - 2.0 * incx, cpy - 2.0 * incy, win, 4)
-    # grey fast path: window, keyframe samples and previous residuals in scalars (registers)
     grey = nch == 1
+    if grey:
+        for j in range(1, 5):
+            off = float(2 - j)
+            _sample(ref, cpx + off * incx, cpy + off * incy, win, j)
+        kk0 = kk1 = kk2 = kk3 = kk4 = 0.0
+    else:
+        kk0, kk1, kk2, kk3, kk4 = _kf_norms(kfv)
+        for j in range(4, 0, -1):
+            off = float(2 - j)
+            _sample_stats(ref, cpx + off * incx, cpy + off * incy, win, 6 - j, 5 - j, kfv, st)
+    # grey fast path: window, keyframe samples and previous residuals in scalars (registers)
     k0 = kfv[0, 0]
     k1 = kfv[1, 0]
     k2 = kfv[2, 0]
@@ -474,23 +558,19 @@ def _line_stereo(
             q3 = e3
             q4 = e4
         else:
-            if loop > 0:
-                # shift the window by one step: offsets −2..+1 take the old −1..+2
-                for j in range(4, 0, -1):
-                    for c in range(nch):
-                        win[j, c] = win[j - 1, c]
-            _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, 0)
-            ee = 0.0
-            cross = 0.0
-            for j in range(5):
-                for c in range(nch):
-                    e = win[j, c] - kfv[j, c]
-                    e_cur[j, c] = e
-                    ee += e * e
-                    cross += e * e_prev[j, c]
-            tmp = e_prev
-            e_prev = e_cur
-            e_cur = tmp
+            r0 = loop % 6
+            r1 = (loop + 5) % 6
+            r2 = (loop + 4) % 6
+            r3 = (loop + 3) % 6
+            r4 = (loop + 2) % 6
+            r5 = (loop + 1) % 6
+            _sample_stats(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, r0, r1, kfv, st)
+            ee = (st[r0, 0] - 2.0 * st[r0, 1] + kk0 + st[r1, 0] - 2.0 * st[r1, 2] + kk1
+                  + st[r2, 0] - 2.0 * st[r2, 3] + kk2 + st[r3, 0] - 2.0 * st[r3, 4] + kk3
+                  + st[r4, 0] - 2.0 * st[r4, 5] + kk4)  # fmt: skip
+            cross = (st[r0, 6] - st[r0, 1] - st[r1, 1] + kk0 + st[r1, 6] - st[r1, 2] - st[r2, 2] + kk1
+                     + st[r2, 6] - st[r2, 3] - st[r3, 3] + kk2 + st[r3, 6] - st[r3, 4] - st[r4, 4] + kk3
+                     + st[r4, 6] - st[r4, 5] - st[r5, 5] + kk4)  # fmt: skip
         ee *= cscale
         cross = cscale * cross if loop > 0 else nan
         if ee < best_err:
@@ -606,9 +686,10 @@ def line_stereo_numba(
     kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale
 ):  # pragma: no cover - compiled
     """Single-pixel line stereo (allocates its own scratch). See :func:`line_stereo_reference`."""
-    buf = np.empty((4, 5, kf.shape[2]), np.float64)
+    buf = np.empty((2, 6, kf.shape[2]), np.float64)
+    st = np.empty((6, 7), np.float64)
     return _line_stereo(
-        kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf
+        kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf, st
     )
 
 
@@ -643,7 +724,8 @@ def _observe_impl(
     # rows are independent; chunk c takes rows 3 + c, 3 + c + ROW_CHUNKS, … (interleaved, so that the
     # static schedule of prange gives every thread a similar share of the textured rows)
     for chunk in prange(ROW_CHUNKS):
-        buf = np.empty((4, 5, nch), np.float64)
+        buf = np.empty((2, 6, nch), np.float64)
+        st = np.empty((6, 7), np.float64)
         for y in range(3 + chunk, h - 3, ROW_CHUNKS):
             for x in range(3, w - 3):
                 has = valid[y, x]
@@ -685,6 +767,7 @@ def _observe_impl(
                         prm,
                         cscale,
                         buf,
+                        st,
                     )
                     if err == -3.0 or err == -2.0:
                         blacklisted[y, x] -= 1
@@ -712,7 +795,7 @@ def _observe_impl(
                         hi = max_depth_id
                     counts[y, C_UPDATE_ATTEMPTED] += 1
                     err, rid, rvar, rlen = _line_stereo(
-                        kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf
+                        kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf, st
                     )
                     diff = rid - ids
                     if err == -1.0:

@@ -42,7 +42,7 @@ class Level:
     camera : PinholeCamera
         Intrinsics of this level (``camera.level(l)``).
     packed : np.ndarray
-        (h, w, N, 3) float32 (F, gx, gy) per pixel and channel (built on first use).
+        (h, w, 3, N) float32 (F, gx, gy) per pixel, each an N-channel block (built on first use).
     """
 
     def __init__(
@@ -100,12 +100,18 @@ class Level:
 
     @property
     def packed(self) -> np.ndarray:
-        """(h, w, N, 3) float32 array of (F, gx, gy) per pixel and channel, built on first use and cached.
+        """(h, w, 3, N) float32 array of (F, gx, gy) per pixel, built on first use and cached.
 
-        The tracker samples it bilinearly: one contiguous read of 3N floats per corner.
+        The tracker samples it bilinearly: one contiguous read of 3N floats per corner, each quantity a
+        contiguous run of N channels (so the channel loop vectorises).
         """
         if self._packed is None:
-            self._packed = np.ascontiguousarray(np.stack([self.feat, self.gx, self.gy], axis=-1))
+            if self._gx is not None and self._gy is not None:
+                self._packed = np.ascontiguousarray(np.stack([self.feat, self._gx, self._gy], axis=-2))
+            elif self._use_numba:
+                self._packed = pack(self.feat)
+            else:
+                self._packed = pack_numpy(self.feat)
         return self._packed
 
     def __repr__(self) -> str:
@@ -198,10 +204,50 @@ def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ numba kernels
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _gradients_kernel(
+    feat: np.ndarray, gx: np.ndarray, gy: np.ndarray, gmean: np.ndarray, max_grad: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    # rows over threads (no reductions across pixels: any thread count gives the same bits); per pixel the
+    # gradients are written first (a vectorisable loop), then their magnitudes summed in channel order
+    h, w, n = feat.shape
+    half = np.float32(0.5)
+    inv_n = np.float32(n)
+    for y in numba.prange(h):
+        for x in range(w):
+            if y == 0 or y == h - 1 or x == 0 or x == w - 1:
+                for c in range(n):
+                    gx[y, x, c] = 0.0
+                    gy[y, x, c] = 0.0
+                gmean[y, x] = 0.0
+                continue
+            for c in range(n):
+                gx[y, x, c] = half * (feat[y, x + 1, c] - feat[y, x - 1, c])
+                gy[y, x, c] = half * (feat[y + 1, x, c] - feat[y - 1, x, c])
+            s = np.float32(0.0)
+            for c in range(n):
+                dx = gx[y, x, c]
+                dy = gy[y, x, c]
+                s += np.sqrt(dx * dx + dy * dy)
+            gmean[y, x] = s / inv_n
+    for y in numba.prange(h):
+        for x in range(w):
+            if y == 0 or y == h - 1 or x == 0 or x == w - 1:
+                max_grad[y, x] = 0.0
+                continue
+            m = gmean[y - 1, x - 1]
+            for yy in range(y - 1, y + 2):
+                for xx in range(x - 1, x + 2):
+                    v = gmean[yy, xx]
+                    if v > m:
+                        m = v
+            max_grad[y, x] = m
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _downsample_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
     h2, w2, n = out.shape
-    for y in range(h2):
+    for y in numba.prange(h2):
         for x in range(w2):
             for c in range(n):
                 s = (feat[2 * y, 2 * x, c] + feat[2 * y, 2 * x + 1, c]) + (
@@ -210,36 +256,40 @@ def _downsample_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no
                 out[y, x, c] = s * np.float32(0.25)
 
 
-@numba.njit(cache=True, nogil=True)
-def _gradients_kernel(
-    feat: np.ndarray, gx: np.ndarray, gy: np.ndarray, gmean: np.ndarray, max_grad: np.ndarray
-) -> None:  # pragma: no cover - compiled
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _pack_kernel(feat: np.ndarray, packed: np.ndarray) -> None:  # pragma: no cover - compiled
+    """(F, gx, gy) of every pixel into ``packed`` (h, w, 3, N), rows over threads (no reductions)."""
     h, w, n = feat.shape
     half = np.float32(0.5)
-    inv_n = np.float32(n)
-    gx[:] = 0
-    gy[:] = 0
-    gmean[:] = 0
-    max_grad[:] = 0
-    for y in range(1, h - 1):
-        for x in range(1, w - 1):
-            s = np.float32(0.0)
+    for y in numba.prange(h):
+        for x in range(w):
             for c in range(n):
-                dx = half * (feat[y, x + 1, c] - feat[y, x - 1, c])
-                dy = half * (feat[y + 1, x, c] - feat[y - 1, x, c])
-                gx[y, x, c] = dx
-                gy[y, x, c] = dy
-                s += np.sqrt(dx * dx + dy * dy)
-            gmean[y, x] = s / inv_n
-    for y in range(1, h - 1):
-        for x in range(1, w - 1):
-            m = gmean[y - 1, x - 1]
-            for yy in range(y - 1, y + 2):
-                for xx in range(x - 1, x + 2):
-                    v = gmean[yy, xx]
-                    if v > m:
-                        m = v
-            max_grad[y, x] = m
+                packed[y, x, 0, c] = feat[y, x, c]
+            if y == 0 or y == h - 1 or x == 0 or x == w - 1:
+                for c in range(n):
+                    packed[y, x, 1, c] = 0.0
+                    packed[y, x, 2, c] = 0.0
+            else:
+                for c in range(n):
+                    packed[y, x, 1, c] = half * (feat[y, x + 1, c] - feat[y, x - 1, c])
+                for c in range(n):
+                    packed[y, x, 2, c] = half * (feat[y + 1, x, c] - feat[y - 1, x, c])
+
+
+def pack_numpy(feat: np.ndarray) -> np.ndarray:
+    """(h, w, N) → (h, w, 3, N) float32 (F, gx, gy) with the gradients of :func:`gradients_numpy`. Reference."""
+    f = np.asarray(feat, np.float32)
+    gx, gy, _ = gradients_numpy(f)
+    return np.ascontiguousarray(np.stack([f, gx, gy], axis=-2))
+
+
+def pack(feat: np.ndarray) -> np.ndarray:
+    """:func:`pack_numpy` as one numba pass (the tracker's sampling layout; no gradient arrays, no max_grad)."""
+    f = np.ascontiguousarray(feat, dtype=np.float32)
+    h, w, n = f.shape
+    out = np.empty((h, w, 3, n), np.float32)
+    _pack_kernel(f, out)
+    return out
 
 
 def downsample(feat: np.ndarray) -> np.ndarray:

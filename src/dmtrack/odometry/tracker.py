@@ -37,6 +37,16 @@ from dmtrack.odometry import _tracker_kernels as K
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.odometry.frame import Frame
 
+_PLACEHOLDERS: dict[int, np.ndarray] = {}
+
+
+def _placeholder(nch: int) -> np.ndarray:
+    """(1, 1, 3, N) stand-in for the packed map: the N > 1 kernel path samples the feature map itself."""
+    ph = _PLACEHOLDERS.get(nch)
+    if ph is None:
+        ph = _PLACEHOLDERS[nch] = np.zeros((1, 1, 3, nch), np.float32)
+    return ph
+
 
 # ============================================================================== tracking reference
 @dataclass
@@ -284,7 +294,8 @@ class Tracker:
             rl.values,
             rl.variances,
             rl.pixel_index,
-            frame_level.packed,
+            frame_level.feat,
+            frame_level.packed if (rl.values.shape[1] == 1 or cfg.affine) else _placeholder(rl.values.shape[1]),
             T,
             prm,
             bool(cfg.affine),

@@ -290,6 +290,30 @@ def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
     return dot2, g2
 
 
+#: From this many channels on, the line search forms its 5-sample SSDs from per-sample dot products
+#: (:func:`_sample_stats`, one pass over the channels per step); below it, directly (:func:`_window_cost`),
+#: which costs fewer horizontal reductions when a step is only a vector or two of channels.
+DOT_MIN_CHANNELS = 24
+
+
+@numba.njit(**_JIT_FAST)
+def _window_cost(ring, kfv, loop):  # pragma: no cover - compiled
+    """Σ_j ‖s_{L−j} − k_j‖² and Σ_j ⟨s_{L−j} − k_j, s_{L−j−1} − k_j⟩ at step L = ``loop`` directly (N > 1, few
+    channels); ``ring`` row t mod 6 holds the sample s_t (see :func:`_line_stereo`). Reads only."""
+    nch = ring.shape[1]
+    ee = 0.0
+    cross = 0.0
+    for j in range(5):
+        r = (loop + 6 - j) % 6
+        rp = (loop + 5 - j) % 6
+        for c in range(nch):
+            k = kfv[j, c]
+            e = ring[r, c] - k
+            ee += e * e
+            cross += e * (ring[rp, c] - k)
+    return ee, cross
+
+
 @numba.njit(**_JIT_FAST)
 def _kf_norms(kfv):  # pragma: no cover - compiled
     """Squared norms of the five keyframe samples (rows of ``kfv``, N > 1)."""
@@ -497,13 +521,15 @@ def _line_stereo(
     # samples pairs with s_{L−j}), so with k_j the keyframe samples
     #   SSD   = Σ_j ‖s_{L−j}‖² − 2⟨s_{L−j}, k_j⟩ + ‖k_j‖²
     #   cross = Σ_j ⟨s_{L−j}, s_{L−j−1}⟩ − ⟨s_{L−j}, k_j⟩ − ⟨s_{L−j−1}, k_j⟩ + ‖k_j‖²
-    # (the same sums as Σ_j ‖s_{L−j} − k_j‖² and Σ_j ⟨s_{L−j} − k_j, s_{L−j−1} − k_j⟩, in float64)
+    # (the same sums as Σ_j ‖s_{L−j} − k_j‖² and Σ_j ⟨s_{L−j} − k_j, s_{L−j−1} − k_j⟩, in float64); with fewer
+    # than DOT_MIN_CHANNELS channels those are formed directly instead (_window_cost)
     win = ring
     grey = nch == 1
-    if grey:
+    dots = nch >= DOT_MIN_CHANNELS
+    if not dots:
         for j in range(1, 5):
             off = float(2 - j)
-            _sample(ref, cpx + off * incx, cpy + off * incy, win, j)
+            _sample(ref, cpx + off * incx, cpy + off * incy, win, j if grey else 6 - j)
         kk0 = kk1 = kk2 = kk3 = kk4 = 0.0
     else:
         kk0, kk1, kk2, kk3, kk4 = _kf_norms(kfv)
@@ -557,6 +583,9 @@ def _line_stereo(
             q2 = e2
             q3 = e3
             q4 = e4
+        elif not dots:
+            _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, loop % 6)
+            ee, cross = _window_cost(win, kfv, loop)
         else:
             r0 = loop % 6
             r1 = (loop + 5) % 6

@@ -13,7 +13,7 @@ from dmtrack.features.alexnet import AlexNet64Feature, AlexNetFeature
 
 # Caffe's per-channel ILSVRC 2012 means in B, G, R order, written out here independently of the package.
 BGR_MEAN = np.array([104.00698793, 116.66876762, 122.67891434])
-BACKENDS = ["numpy", pytest.param("torch", marks=pytest.mark.skipif(
+BACKENDS = ["fft", "numpy", pytest.param("torch", marks=pytest.mark.skipif(
     __import__("importlib").util.find_spec("torch") is None, reason="PyTorch not installed"))]
 
 
@@ -257,6 +257,47 @@ def test_fused_projection_equals_projecting_the_map(image, npz_path, backend):
     fused = f.compute_projected(image, pw, pb)
     plain = f.compute(image) @ pw.T + pb
     np.testing.assert_allclose(fused, plain, rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_many_tiles_and_partial_edge_tiles(conv1, npz_path, backend):
+    """An image several FFT tiles wide and high, not a multiple of the tile size: every tile seam and the cropped
+    last row/column of tiles must match the direct convolution (and the fused projection the plain one)."""
+    from dmtrack.features.alexnet import fft_length
+
+    img = np.random.default_rng(7).integers(0, 256, (150, 203, 3), dtype=np.uint8)
+    fh, fw = fft_length(150, 11), fft_length(203, 11)
+    assert 150 % (fh - 10) and 203 % (fw - 10) and 150 > 2 * (fh - 10) and 203 > 2 * (fw - 10)
+    f = AlexNetFeature(scale=1.0, weights=npz_path, backend=backend)
+    out = f.compute(img)
+    ref = reference_caffe(img, *conv1)
+    np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-3)
+    rng = np.random.default_rng(8)
+    pw = rng.standard_normal((3, 96)).astype(np.float32)
+    pb = rng.standard_normal(3).astype(np.float32)
+    np.testing.assert_allclose(f.compute_projected(img, pw, pb), ref @ pw.T + pb, rtol=1e-4, atol=2e-3)
+
+
+def test_fft_is_deterministic_across_thread_counts(conv1, npz_path):
+    from dmtrack.features.alexnet import alexnet_input, conv1_relu
+
+    img = np.random.default_rng(9).integers(0, 256, (120, 170, 3), dtype=np.uint8)
+    f = AlexNetFeature(weights=npz_path, backend="fft")
+    x = alexnet_input(img, f.conv1)
+    proj = (np.random.default_rng(10).standard_normal((4, 96)).astype(np.float32), np.ones(4, np.float32))
+    for project in (None, proj):
+        one = conv1_relu(x, f.conv1, 1.23, "fft", project=project, threads=1)
+        for n in (2, 3):
+            np.testing.assert_array_equal(conv1_relu(x, f.conv1, 1.23, "fft", project=project, threads=n), one)
+
+
+def test_backend_choice(npz_path):
+    from dmtrack.features.alexnet import AUTO_BACKEND, resolve_backend
+
+    assert resolve_backend("auto") == AUTO_BACKEND == "fft"
+    assert AlexNetFeature(weights=npz_path).backend == "fft"
+    with pytest.raises(InputError, match="backend must be one of"):
+        AlexNetFeature(weights=npz_path, backend="cuda")
 
 
 def test_missing_weights_error(tmp_path, monkeypatch):

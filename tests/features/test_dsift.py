@@ -119,3 +119,36 @@ def test_brightness_offset_invariance() -> None:
     low = np.clip(img.astype(np.int32), 0, 200).astype(np.uint8)
     f = get_feature("dsift")
     np.testing.assert_array_equal(f.compute(low), f.compute((low + 40).astype(np.uint8)))
+
+
+@pytest.mark.parametrize("clamp", [None, 0.2])
+def test_result_does_not_depend_on_thread_count(clamp: float | None) -> None:
+    img = _textured(70, 53, seed=11).astype(np.float32)
+    f = get_feature("dsift", clamp=clamp)
+    one = f.compute_threads(img, f.scale, threads=1)
+    for n in (2, 3):
+        np.testing.assert_array_equal(f.compute_threads(img, f.scale, threads=n), one)
+    np.testing.assert_array_equal(f.compute(img), one)
+
+
+def test_cell_histograms_are_not_overwritten_by_the_next_call() -> None:
+    f = get_feature("dsift")
+    a = f.cell_histograms(_textured(30, 40, seed=12))
+    a_copy = a.copy()
+    f.cell_histograms(_textured(30, 40, seed=13))
+    np.testing.assert_array_equal(a, a_copy)
+
+
+def test_feature_threads_environment_variable(monkeypatch: pytest.MonkeyPatch) -> None:
+    from dmtrack.errors import InputError
+    from dmtrack.features import _nn
+
+    img = _textured(40, 37, seed=14)
+    f = get_feature("dsift")
+    ref = f.compute_threads(img, f.scale, threads=1)
+    monkeypatch.setenv(_nn.THREADS_ENV, "3")
+    assert _nn.default_threads() == 3
+    np.testing.assert_array_equal(f.compute(img), ref)
+    monkeypatch.setenv(_nn.THREADS_ENV, "many")
+    with pytest.raises(InputError, match="DMTRACK_FEATURE_THREADS"):
+        f.compute(img)

@@ -57,7 +57,8 @@ def test_measure_is_the_odometrys_max_grad() -> None:
     rng = np.random.default_rng(1)
     feat = (rng.random((24, 40, 8)) * 255).astype(np.float32)
     _, _, mg = frame.gradients(feat)
-    np.testing.assert_array_equal(channel_mean_gradient(feat), mg)
+    # the odometry's kernel sums the N magnitudes in a vectorised order: equal up to float32 rounding
+    np.testing.assert_allclose(channel_mean_gradient(feat), mg, rtol=1e-6)
 
 
 class _Scaled(Feature):

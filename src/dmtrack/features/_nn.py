@@ -7,11 +7,18 @@ so that they run at BLAS speed without PyTorch.  "Shift-and-stitch" dense evalua
 stride) is built from :func:`conv2d_hwc` and :func:`maxpool_shift`.
 
 PyTorch is imported only by :func:`torch_module` (when the ``torch`` backend is chosen).
+
+:func:`parallel_for` spreads row / tile blocks of the CPU features (dense SIFT, AlexNet's FFT convolution) over a
+process-wide thread pool; :func:`scratch` keeps their large per-thread work arrays between calls.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal
 
 import numpy as np
@@ -22,6 +29,92 @@ Backend = Literal["auto", "numpy", "torch"]
 
 #: Bytes of im2col buffer per block in :func:`conv2d_hwc`.
 IM2COL_BLOCK_BYTES = 48 << 20
+
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def thread_pool(n: int) -> ThreadPoolExecutor:
+    """The process-wide worker pool of the CPU features, with at least ``n`` threads (idle workers block)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL._max_workers < n:  # noqa: SLF001 - ThreadPoolExecutor has no public size
+            old, _POOL = _POOL, ThreadPoolExecutor(max_workers=n, thread_name_prefix="dmtrack-features")
+            if old is not None:
+                old.shutdown(wait=False)
+        return _POOL
+
+
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
+    """A per-thread scratch array (uninitialised), kept and reused across calls while ``shape``/``dtype`` stay
+    the same (saves the page faults of fresh large arrays).  Never return it, or a view of it, to a caller."""
+    arrays = getattr(_SCRATCH, "arrays", None)
+    if arrays is None:
+        arrays = _SCRATCH.arrays = {}
+    a = arrays.get(name)
+    if a is None or a.shape != tuple(shape) or a.dtype != np.dtype(dtype):
+        a = arrays[name] = np.empty(shape, dtype)
+    return a
+
+
+#: Environment variable overriding the default thread count of :func:`parallel_for`.
+THREADS_ENV = "DMTRACK_FEATURE_THREADS"
+
+
+def default_threads() -> int:
+    """Threads for :func:`parallel_for` when none are given: ``$DMTRACK_FEATURE_THREADS`` if set, else numba's
+    setting in the calling thread."""
+    env = os.environ.get(THREADS_ENV, "").strip()
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            raise InputError(f"${THREADS_ENV} must be an integer, got {env!r}") from None
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def parallel_for(fn: Callable[[int, int], None], n: int, block: int, threads: int | None = None) -> None:
+    """Call ``fn(a, b)`` on the blocks ``[a, b)`` of ``range(n)`` (``block`` items each), on up to ``threads``
+    threads (default :func:`default_threads`) that take the next block when done (dynamic schedule).
+
+    ``fn`` should release the GIL (nogil numba kernels, numpy FFTs / BLAS) and write disjoint outputs per block,
+    so that the result does not depend on the thread count.  The calling thread is one of the workers; runs
+    inline with one thread or one block.  Unlike numba's ``prange``, idle threads block instead of spinning,
+    which matters on a 2-core machine shared with the odometry's own parallel kernels.
+    """
+    block = max(1, int(block))
+    starts = range(0, max(0, n), block)
+    n_threads = min(default_threads() if threads is None else max(1, int(threads)), len(starts))
+    if n_threads <= 1:
+        for a in starts:
+            fn(a, min(n, a + block))
+        return
+    it = iter(starts)
+    lock = threading.Lock()
+
+    def work() -> None:
+        while True:
+            with lock:
+                a = next(it, None)
+            if a is None:
+                return
+            fn(a, min(n, a + block))
+
+    # the calling thread works too; helpers that have not started when it runs out of blocks are cancelled
+    # (so that a call from inside a busy pool cannot wait for itself)
+    futures = [thread_pool(n_threads).submit(work) for _ in range(n_threads - 1)]
+    try:
+        work()
+    finally:
+        for fut in futures:
+            if not fut.cancel():
+                fut.result()
 
 
 def have_torch() -> bool:

@@ -15,9 +15,11 @@ One 128-dimensional descriptor per pixel, single scale (the original resolution)
    sums the orientation energy over box cells (for odd c the half-integer cell centre gives end taps of ½);
    ``"bilinear"``: ``w(t) = max(0, 1 − |t|/c)`` — Lowe's/VLFeat's bilinear spatial interpolation.
    Samples outside the image contribute nothing.
-   Implementation: one separable filtering per orientation band (with the kernel centred on the fractional
-   part of the cell offsets), then the 16 cells are integer-shifted reads of the 8 filtered bands, gathered
-   and normalised by a numba kernel.
+   Implementation: one separable filtering of the 8 orientation bands (with the kernel centred on the
+   fractional part of the cell offsets, only its non-zero taps applied), then the 16 cells are integer-shifted
+   reads of the 8 filtered bands, gathered and normalised by a numba kernel; ‖h‖² is the sum of 16 shifted
+   reads of the per-position band energy.  All passes are row-parallel on a pool of threads
+   (:func:`dmtrack.features._nn.parallel_for`), float32 (norms float64), and independent of the thread count.
 4. **Normalisation** per pixel, as SIFT flow: ``d = h / (‖h‖ + ε) · 255`` with ε = 0.01 (SIFT flow's 8-bit
    output range, but float and not quantised); then × the feature scale.  A pixel whose cells hold no gradient
    energy gives the zero vector.  Option ``clamp=0.2`` adds Lowe's step instead: ``d = min(h/(‖h‖+ε), 0.2)``,
@@ -39,11 +41,11 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-import cv2
 import numba
 import numpy as np
 
-from dmtrack.features.base import Feature
+from dmtrack.features import _nn
+from dmtrack.features.base import Feature, prepare_image
 
 N_CELLS = 4  #: cells per side
 N_BINS = 8  #: orientation bins
@@ -129,13 +131,169 @@ def cell_layout(cell_size: int, spatial: SpatialWeighting) -> tuple[np.ndarray, 
     return shifts, kernel, radius
 
 
-@numba.njit(cache=True)
-def _assemble_kernel(cpad, shifts, margin, clamp, eps, gain, out):  # pragma: no cover - compiled
-    h, w, dim = out.shape
+#: Rows per work item of the row-parallel kernels (see :func:`dmtrack.features._nn.parallel_for`).
+ROW_BLOCK = 16
+
+
+@numba.njit(cache=True, nogil=True)
+def _bands_rows(img, cosk, sink, alpha, int_alpha, margin, r0, r1, out):  # pragma: no cover - compiled
+    """Rows r0..r1-1 of :func:`orientation_bands` of the grey image, float32 and in the same operation order
+    (so bit-identical), written at ``out[y + margin, x + margin, :]`` (the margins are left alone)."""
+    h, w = img.shape
+    nb = cosk.shape[0]
+    zero = np.float32(0.0)
+    half = np.float32(0.5)
+    one = np.float32(1.0)
+    mag = np.zeros(w, np.float32)
+    u = np.zeros(w, np.float32)
+    v = np.zeros(w, np.float32)
+    p = np.zeros(w, np.float32)
+    r = np.zeros(w, np.float32)
+    base = np.zeros(w, np.float32)
+    for y in range(r0, r1):
+        dst = out[y + margin, margin : margin + w]
+        if y == 0 or y == h - 1 or w < 3:
+            for x in range(w):
+                for k in range(nb):
+                    dst[x, k] = zero
+            continue
+        for x in range(1, w - 1):
+            gx = half * (img[y, x + 1] - img[y, x - 1])
+            gy = half * (img[y + 1, x] - img[y - 1, x])
+            m = np.sqrt(gx * gx + gy * gy)
+            safe = m if m > zero else one
+            mag[x] = m
+            u[x] = gx / safe
+            v[x] = gy / safe
+        for k in range(nb):
+            c = cosk[k]
+            sn = sink[k]
+            for x in range(1, w - 1):
+                q = u[x] * c + v[x] * sn
+                p[x] = q if q > zero else zero
+            if int_alpha > 0:
+                # p^alpha by binary powering in _int_power's order
+                n = int_alpha
+                first = True
+                for x in range(1, w - 1):
+                    base[x] = p[x]
+                while n:
+                    if n & 1:
+                        if first:
+                            for x in range(1, w - 1):
+                                r[x] = base[x]
+                            first = False
+                        else:
+                            for x in range(1, w - 1):
+                                r[x] = r[x] * base[x]
+                    n >>= 1
+                    if n:
+                        for x in range(1, w - 1):
+                            base[x] = base[x] * base[x]
+            else:
+                for x in range(1, w - 1):
+                    r[x] = np.float32(p[x] ** alpha)
+            for x in range(1, w - 1):
+                dst[x, k] = r[x] * mag[x]
+        for k in range(nb):
+            dst[0, k] = zero
+            dst[w - 1, k] = zero
+
+
+@numba.njit(cache=True, nogil=True)
+def _hfilter_rows(src, offs, wts, r0, r1, dst):  # pragma: no cover - compiled
+    """``dst[y, x] = Σ_t wts[t] · src[y, x + offs[t]]`` (zero outside; taps summed in order) for rows r0..r1-1
+    of ``(H, W, B)`` C-contiguous arrays: per row, flat sweeps over the W·B values."""
+    _, w, nb = src.shape
+    wn = w * nb
+    zero = np.float32(0.0)
+    for y in range(r0, r1):
+        s = src[y].reshape(wn)
+        d = dst[y].reshape(wn)
+        for i in range(wn):
+            d[i] = zero
+        for t in range(offs.shape[0]):
+            o = offs[t] * nb
+            lo = max(0, -o)
+            hi = min(wn, wn - o)
+            if hi <= lo:
+                continue
+            wt = wts[t]
+            dd = d[lo:hi]
+            ss = s[lo + o : hi + o]
+            for i in range(hi - lo):
+                dd[i] += wt * ss[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def _vfilter_rows(src, offs, wts, r0, r1, dst, energy):  # pragma: no cover - compiled
+    """``dst[y] = Σ_t wts[t] · src[y + offs[t]]`` (zero outside; taps summed in order) for rows r0..r1-1, and
+    ``energy[y, x] = Σ_k dst[y, x, k]²`` (float64); 8 bands."""
+    h, w, nb = src.shape
+    wn = w * nb
+    zero = np.float32(0.0)
+    for y in range(r0, r1):
+        d = dst[y].reshape(wn)
+        for i in range(wn):
+            d[i] = zero
+        for t in range(offs.shape[0]):
+            yy = y + offs[t]
+            if 0 <= yy < h:
+                wt = wts[t]
+                s = src[yy].reshape(wn)
+                for i in range(wn):
+                    d[i] += wt * s[i]
+        d2 = dst[y]
+        e = energy[y]
+        for x in range(w):
+            c = d2[x]
+            ss = 0.0
+            for k in range(8):
+                val = np.float64(c[k])
+                ss += val * val
+            e[x] = ss
+
+
+@numba.njit(cache=True, nogil=True)
+def _assemble_rows(cpad, energy, shifts, margin, eps, gain, r0, r1, out):  # pragma: no cover - compiled
+    """Rows r0..r1-1 of the descriptors (no clamp), 4×4 cells × 8 bins: the cells are shifted reads of the
+    filtered bands, ``d = gain · h / (‖h‖ + eps)`` with ‖h‖² summed from the per-position band energies
+    (0 where ‖h‖ = 0)."""
+    w = out.shape[1]
+    fac = np.empty(w, np.float64)
+    for y in range(r0, r1):
+        for x in range(w):
+            fac[x] = 0.0
+        for i in range(4):
+            erow = energy[y + margin + shifts[i]]
+            for j in range(4):
+                off = margin + shifts[j]
+                for x in range(w):
+                    fac[x] += erow[x + off]
+        for x in range(w):
+            ss = fac[x]
+            fac[x] = gain / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+        orow = out[y]
+        for i in range(4):
+            crow = cpad[y + margin + shifts[i]]
+            for x in range(w):
+                fx = fac[x]
+                o = orow[x]
+                for j in range(4):
+                    c = crow[x + margin + shifts[j]]
+                    b = (i * 4 + j) * 8
+                    for k in range(8):
+                        o[b + k] = np.float32(np.float64(c[k]) * fx)
+
+
+@numba.njit(cache=True, nogil=True)
+def _assemble_clamp_rows(cpad, shifts, margin, clamp, eps, gain, r0, r1, out):  # pragma: no cover - compiled
+    """Rows r0..r1-1 with Lowe's clamp: ``d = min(h / (‖h‖ + eps), clamp)``, ``d = gain · d / ‖d‖``."""
+    w, dim = out.shape[1], out.shape[2]
     nb = cpad.shape[2]
     n = shifts.shape[0]
     buf = np.empty(dim, np.float64)
-    for y in range(h):
+    for y in range(r0, r1):
         for x in range(w):
             ss = 0.0
             idx = 0
@@ -148,18 +306,15 @@ def _assemble_kernel(cpad, shifts, margin, clamp, eps, gain, out):  # pragma: no
                         buf[idx] = v
                         ss += v * v
                         idx += 1
-            inv = 1.0 / (math.sqrt(ss) + eps)
-            if clamp > 0.0:
-                ss2 = 0.0
-                for d in range(dim):
-                    v = buf[d] * inv
-                    if v > clamp:
-                        v = clamp
-                    buf[d] = v
-                    ss2 += v * v
-                f = gain / math.sqrt(ss2) if ss2 > 0.0 else 0.0
-            else:
-                f = gain * inv
+            inv = 1.0 / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+            ss2 = 0.0
+            for d in range(dim):
+                v = buf[d] * inv
+                if v > clamp:
+                    v = clamp
+                buf[d] = v
+                ss2 += v * v
+            f = gain / math.sqrt(ss2) if ss2 > 0.0 else 0.0
             for d in range(dim):
                 out[y, x, d] = np.float32(buf[d] * f)
 
@@ -217,27 +372,69 @@ class DenseSiftFeature(Feature):
         self._shifts, self._kernel, self._radius = cell_layout(self.cell_size, spatial)
         self._margin = int(np.abs(self._shifts).max())
 
-    def cell_histograms(self, image: np.ndarray) -> np.ndarray:
+    def cell_histograms(self, image: np.ndarray, threads: int | None = None) -> np.ndarray:
         """Padded cell-sum images ``(H + 2M, W + 2M, 8)`` float32 (M = max |shift|); see :func:`cell_layout`."""
-        gx, gy = image_gradients(image)
-        bands = orientation_bands(gx, gy, self.alpha)
+        return self._cell_sums(image, threads)[0].copy()
+
+    def _cell_sums(self, image: np.ndarray, threads: int | None) -> tuple[np.ndarray, np.ndarray]:
+        """The padded cell sums and their per-position energy ``Σ_k cpad[..., k]²`` (float64), in the calling
+        thread's scratch arrays (valid until its next call)."""
+        img = np.ascontiguousarray(image, dtype=np.float32)
+        h, w = img.shape
         m = self._margin
-        padded = np.zeros((bands.shape[0] + 2 * m, bands.shape[1] + 2 * m, N_BINS), np.float32)
-        padded[m : m + bands.shape[0], m : m + bands.shape[1]] = bands
-        k = self._kernel
-        out = np.empty_like(padded)
-        # OpenCV filters at most 4 channels per call in some builds; filter 4 bands at a time.
-        for c0 in range(0, N_BINS, 4):
-            src = np.ascontiguousarray(padded[:, :, c0 : c0 + 4])
-            out[:, :, c0 : c0 + 4] = cv2.sepFilter2D(src, cv2.CV_32F, k, k, borderType=cv2.BORDER_CONSTANT)
-        return out
+        hp, wp = h + 2 * m, w + 2 * m
+        # orientation bands into the zero-padded frame, then the separable cell filter (zero outside), all
+        # row-parallel; only the kernel's non-zero taps are applied
+        bands = _nn.scratch("dsift.bands", (hp, wp, N_BINS), np.float32)
+        bands[:m] = 0.0
+        bands[m + h :] = 0.0
+        bands[m : m + h, :m] = 0.0
+        bands[m : m + h, m + w :] = 0.0
+        theta = 2.0 * math.pi * np.arange(N_BINS) / N_BINS
+        cosk = np.array([np.float32(math.cos(t)) for t in theta], np.float32)
+        sink = np.array([np.float32(math.sin(t)) for t in theta], np.float32)
+        int_alpha = int(self.alpha) if float(self.alpha).is_integer() and 1 <= self.alpha <= 64 else 0
+        alpha = np.float32(self.alpha)
+        _nn.parallel_for(
+            lambda a, b: _bands_rows(img, cosk, sink, alpha, int_alpha, m, a, b, bands), h, ROW_BLOCK, threads
+        )
+        nz = np.flatnonzero(self._kernel)
+        offs = (nz - self._radius).astype(np.int64)
+        wts = np.ascontiguousarray(self._kernel[nz], dtype=np.float32)
+        tmp = _nn.scratch("dsift.tmp", (hp, wp, N_BINS), np.float32)
+        _nn.parallel_for(lambda a, b: _hfilter_rows(bands, offs, wts, a, b, tmp), hp, ROW_BLOCK, threads)
+        cpad = bands  # reused: the bands are no longer needed
+        energy = _nn.scratch("dsift.energy", (hp, wp), np.float64)
+        _nn.parallel_for(lambda a, b: _vfilter_rows(tmp, offs, wts, a, b, cpad, energy), hp, ROW_BLOCK, threads)
+        return cpad, energy
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
-        cpad = self.cell_histograms(image)
+        return self.compute_threads(image, gain)
+
+    def compute_threads(self, image: np.ndarray, gain: float, threads: int | None = None) -> np.ndarray:
+        """Descriptors of ``image`` (grey or RGB, as :meth:`compute`) times ``gain``, on ``threads`` threads
+        (default: numba's count in the calling thread); the result does not depend on the thread count."""
+        image = prepare_image(image, colour=False)
+        cpad, energy = self._cell_sums(image, threads)
         h, w = image.shape[:2]
         out = np.empty((h, w, self.channels), np.float32)
-        clamp = -1.0 if self.clamp is None else self.clamp
-        _assemble_kernel(cpad, self._shifts, self._margin, clamp, self.eps, 255.0 * gain, out)
+        g = 255.0 * gain
+        m = self._margin
+        if self.clamp is None:
+            _nn.parallel_for(
+                lambda a, b: _assemble_rows(cpad, energy, self._shifts, m, self.eps, g, a, b, out),
+                h,
+                ROW_BLOCK,
+                threads,
+            )
+        else:
+            clamp = self.clamp
+            _nn.parallel_for(
+                lambda a, b: _assemble_clamp_rows(cpad, self._shifts, m, clamp, self.eps, g, a, b, out),
+                h,
+                ROW_BLOCK,
+                threads,
+            )
         return out
 
     def __repr__(self) -> str:

@@ -78,6 +78,33 @@ def test_same_seed_same_bytes(synth_run: tuple[Path, object], tmp_path: Path) ->
     assert (tmp_path / "keyframes.txt").read_bytes() == (out / "keyframes.txt").read_bytes()
 
 
+def test_cli_threads_option_gives_the_same_trajectory(
+    synth_run: tuple[Path, object], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`dmtrack run --threads 1` runs the kernels serially: byte-identical to the default (all cores) run."""
+    import os
+
+    import numba
+
+    from dmtrack.experiments.runner import THREAD_ENV_VARS
+
+    for var in (*THREAD_ENV_VARS, "DMTRACK_FEATURE_THREADS"):  # restored by monkeypatch afterwards
+        if var in os.environ:
+            monkeypatch.setenv(var, os.environ[var])
+        else:
+            monkeypatch.delenv(var, raising=False)
+    prev = numba.get_num_threads()
+    try:
+        rc = main(["run", SYNTH, "--threads", "1", "--out", str(tmp_path), "--no-progress", "--no-pointcloud",
+                   "--no-depth-images"])
+        assert rc == 0 and numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(prev)
+    out, _ = synth_run
+    assert (tmp_path / "trajectory.txt").read_bytes() == (out / "trajectory.txt").read_bytes()
+    assert main(["run", SYNTH, "--threads", "0", "--out", str(tmp_path / "x")]) == 1
+
+
 def test_cli_run_on_shipped_sample(tmp_path: Path, sample_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rc = main(["run", str(sample_dir), "--max-frames", "12", "--start", "5", "--out", str(tmp_path), "--no-progress"])
     assert rc == 0

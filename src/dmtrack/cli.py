@@ -119,7 +119,18 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    import os
     from pathlib import Path
+
+    if args.threads is not None:
+        from dmtrack.errors import InputError
+        from dmtrack.experiments.runner import limit_threads
+
+        if args.threads < 1:
+            raise InputError(f"--threads must be ≥ 1, got {args.threads}")
+
+        os.environ["DMTRACK_FEATURE_THREADS"] = str(args.threads)
+        limit_threads(args.threads)
 
     from dmtrack.api import run_to_directory
     from dmtrack.odometry.config import VOConfig
@@ -319,6 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-pointcloud", action="store_true", help="do not write pointcloud.ply")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: only on a terminal)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="threads of the kernels and features (default: all cores; 1 is faster when other jobs "
+                        "share the cores; results do not depend on it)")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("features", help="list the available features")

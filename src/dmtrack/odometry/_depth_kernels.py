@@ -214,6 +214,17 @@ def _schedule(parallel: bool):  # noqa: ANN202
     return numba.parallel_chunksize(1) if parallel else contextlib.nullcontext()
 
 
+@contextlib.contextmanager
+def _one_thread():  # noqa: ANN202
+    """Run numba's parallel kernels on one thread (in the calling thread) inside the block."""
+    prev = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(prev)
+
+
 def _variant(fn, suffix: str):
     """A copy of the python function ``fn`` named ``fn.__name__ + suffix``.
 
@@ -868,7 +879,6 @@ def _observe_impl(
                             next_id[y, x] = int(frame_id + inc)
 
 
-_observe_serial = numba.njit(**_JIT)(_variant(_observe_impl, "_serial"))
 _observe_parallel = numba.njit(parallel=True, **_JIT)(_variant(_observe_impl, "_parallel"))
 
 
@@ -896,8 +906,11 @@ def observe_numba(
     counts = np.zeros((h, N_COUNTS), np.int64)
     use_good = good is not None
     g = good if use_good else np.ones((1, 1), np.bool_)
-    fn = _observe_parallel if parallel else _observe_serial
-    with _schedule(parallel):
+    # one compiled kernel for both: the serial call runs the parallel build on one thread, so serial and
+    # threaded updates are the same machine code (the fast-math channel loops it calls may otherwise be
+    # vectorised with different reduction orders in two separately compiled kernels)
+    fn = _observe_parallel
+    with _schedule(parallel) if parallel else _one_thread():
         fn(
             *state,
             kf,

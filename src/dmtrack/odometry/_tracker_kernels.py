@@ -416,7 +416,6 @@ def _combine_eval(part: np.ndarray) -> tuple[int, float, int, int, float, float,
     return (int(tot[0]), tot[1], int(tot[2]), int(tot[3]), tot[4], tot[5], tot[6], tot[7], tot[8], tot[9])
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
 def eval_pass(
     points: np.ndarray,
     ref_vals: np.ndarray,
@@ -430,7 +429,7 @@ def eval_pass(
     flags: np.ndarray,
     write_flags: bool,
     buf: np.ndarray,
-) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
+) -> tuple[int, float, int, int, float, float, float, float, float, float]:
     """One residual evaluation of the reference against the frame at pose T (4×4, keyframe→frame).
 
     Per point p (reference coordinates, float32 (n, 3)): p' = R p + t, (u, v) its projection; kept if
@@ -449,13 +448,19 @@ def eval_pass(
     Returns
     -------
     (n_in, Σ W r², good, bad, Σ min(1, z/z'), affine sums sxx, syy, sx, sy, sw)
+
+    Runs :func:`eval_pass_parallel` on one thread: the serial and the threaded evaluation are the *same*
+    compiled code, so they are bit-identical by construction. (Two separately compiled kernels are not: the
+    vectorised float32 channel loop lets LLVM choose its reduction order per compilation context, and a
+    serial and a ``prange`` caller may end up with different ones.)
     """
-    nb = (points.shape[0] + BLOCK - 1) // BLOCK
-    part = np.empty((nb, _NE))
-    for blk in range(nb):
-        _eval_block(blk, points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags,
-                    write_flags, buf, part)  # fmt: skip
-    return _combine_eval(part)
+    prev = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        return eval_pass_parallel(points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags,
+                                  write_flags, buf)  # fmt: skip
+    finally:
+        numba.set_num_threads(prev)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -473,7 +478,8 @@ def eval_pass_parallel(
     write_flags: bool,
     buf: np.ndarray,
 ) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
-    """:func:`eval_pass` with the blocks distributed over threads (``prange``); bit-identical results."""
+    """:func:`eval_pass` with the blocks distributed over numba's threads (``prange``); the result does not
+    depend on the thread count (fixed blocks, combined in order)."""
     nb = (points.shape[0] + BLOCK - 1) // BLOCK
     part = np.empty((nb, _NE))
     for blk in numba.prange(nb):

@@ -257,17 +257,21 @@ def _unzero(v: float) -> float:  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT_INLINE)
-def _sample(img, x, y, out, row):  # pragma: no cover - compiled
-    """Bilinear sample of all channels of ``img`` at (x, y) into ``out[row, :]`` (LSD getInterpolatedElement)."""
+def _bilinear(x, y):  # pragma: no cover - compiled
+    """Integer corner (ix, iy) and the weights (w00, w01, w10, w11) of a bilinear sample at (x, y), in LSD-SLAM's
+    arithmetic (w01 weighs the pixel below, w10 the one to the right)."""
     ix = int(x)
     iy = int(y)
     dx = x - ix
     dy = y - iy
     dxdy = dx * dy
-    w11 = dxdy
-    w01 = dy - dxdy
-    w10 = dx - dxdy
-    w00 = 1.0 - dx - dy + dxdy
+    return ix, iy, 1.0 - dx - dy + dxdy, dy - dxdy, dx - dxdy, dxdy
+
+
+@numba.njit(**_JIT_INLINE)
+def _sample(img, x, y, out, row):  # pragma: no cover - compiled
+    """Bilinear sample of all channels of ``img`` at (x, y) into ``out[row, :]`` (LSD getInterpolatedElement)."""
+    ix, iy, w00, w01, w10, w11 = _bilinear(x, y)
     if img.shape[2] == 1:  # grey fast path (same arithmetic)
         out[row, 0] = (
             w11 * img[iy + 1, ix + 1, 0] + w01 * img[iy + 1, ix, 0] + w10 * img[iy, ix + 1, 0] + w00 * img[iy, ix, 0]
@@ -346,15 +350,7 @@ def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - co
     With them every 5-sample SSD of the search and its cross term with the previous step are sums of
     scalars (see :func:`_line_stereo`): one pass over the N channels per search step instead of five.
     """
-    ix = int(x)
-    iy = int(y)
-    dx = x - ix
-    dy = y - iy
-    dxdy = dx * dy
-    w11 = dxdy
-    w01 = dy - dxdy
-    w10 = dx - dxdy
-    w00 = 1.0 - dx - dy + dxdy
+    ix, iy, w00, w01, w10, w11 = _bilinear(x, y)
     nrm = d0 = d1 = d2 = d3 = d4 = ss = 0.0
     for c in range(img.shape[2]):
         v = w11 * img[iy + 1, ix + 1, c] + w01 * img[iy + 1, ix, c] + w10 * img[iy, ix + 1, c] + w00 * img[iy, ix, c]

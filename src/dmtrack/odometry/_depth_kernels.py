@@ -36,6 +36,8 @@ import numba
 import numpy as np
 from numba import prange
 
+from dmtrack.odometry._fastmath import FASTMATH
+
 # ------------------------------------------------------------------------------------------ constants
 #: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
 GRADIENT_SAMPLE_DIST = 1.0
@@ -283,12 +285,7 @@ def _sample(img, x, y, out, row):  # pragma: no cover - compiled
         )
 
 
-#: fast-math flags of the multichannel channel loops (re-association lets LLVM vectorise the channel sums); no
-#: nnan/ninf. Only N > 1 takes these paths, so grey keeps the scalar arithmetic of the reference. The order of the
-#: vectorised sums is fixed at compile time: deterministic on a given machine, equal to the reference up to
-#: rounding.
-_FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
-_JIT_FAST = {**_JIT, "fastmath": _FASTMATH}
+_JIT_FAST = {**_JIT, "fastmath": set(FASTMATH)}  # see dmtrack.odometry._fastmath
 
 
 @numba.njit(**_JIT_FAST)

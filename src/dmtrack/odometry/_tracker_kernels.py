@@ -20,6 +20,8 @@ import math
 import numba
 import numpy as np
 
+from dmtrack.odometry._fastmath import FASTMATH
+
 #: Columns of the per-point buffer written by :func:`eval_pass`: x', y', z' (point in the frame's camera),
 #: Sxx, Sxy, Syy (Σ_c W g gᵀ), sx, sy (Σ_c W r g); all zero for points outside the image.
 BUF_COLS = 8
@@ -169,14 +171,9 @@ def eval_params(
     return np.array([fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr], np.float64)
 
 
-#: fast-math flags of the multichannel inner loop: re-association lets LLVM vectorise the channel sums (AVX2:
-#: 4 doubles per instruction); no nnan/ninf, so the Huber select may see inf/nan in the unused branch safely.
-#: The order of the vectorised sums is fixed at compile time: results are deterministic on a given machine
-#: (and equal to the scalar reference up to rounding).
-_FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=set(FASTMATH))
 def _channel_sums(
     feat, iy, ix, w00, w01, w10, w11, ref_row, aff_a, aff_b, fx, fy, g0, g1, noise2, s2, huber_half, huber2
 ):  # pragma: no cover - compiled

@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.odometry._fastmath import FASTMATH
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.geometry.camera import PinholeCamera
@@ -204,7 +205,7 @@ def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ numba kernels
-@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract", "nsz"})
+@numba.njit(cache=True, nogil=True, fastmath=set(FASTMATH))
 def _magnitude_sum(gx: np.ndarray, gy: np.ndarray) -> np.float32:  # pragma: no cover - compiled
     """Σ_c sqrt(gx_c² + gy_c²) in float32 (N > 1), vectorised: the summation order is the compiler's (fixed at
     compile time), so it equals the channel-order sum of :func:`gradients_numpy` up to float32 rounding."""

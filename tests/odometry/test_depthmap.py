@@ -8,6 +8,8 @@ poses, so the true inverse depth of every keyframe pixel is known. Kernel-vs-ref
 from __future__ import annotations
 
 import functools
+import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -116,7 +118,9 @@ def test_line_stereo_recovers_plane_inverse_depth(seeds):
     fr, _ = _frame(6, cam, T_wc, seeds)
     res = _stereo_all(kf, fr, np.linalg.inv(T_wc), DepthConfig(), 1.0)
     ok = res[:, 2] >= 0
-    assert ok.mean() > 0.5, f"only {ok.mean():.2f} of the stereo searches succeeded"
+    # measured 0.46: on this small image many full-range (idepth 0 … 20) searches have their near end outside
+    # the image, which LSD-SLAM counts as out of bounds
+    assert ok.mean() > 0.4, f"only {ok.mean():.2f} of the stereo searches succeeded"
     xs, ys = res[ok, 0].astype(int), res[ok, 1].astype(int)
     truth = 1.0 / z0[ys, xs]
     err = res[ok, 3] - truth
@@ -154,7 +158,7 @@ def test_mean_reduction_over_identical_channels_equals_grey():
     index = {(int(x), int(y)): i for i, (x, y) in enumerate(r3s[:, :2])}
     r3s = r3s[[index[(int(x), int(y))] for x, y in r1[:, :2]]]
     both_s = (r1[:, 2] >= 0) & (r3s[:, 2] >= 0)
-    assert both_s.sum() > 0.5 * len(r1)
+    assert both_s.sum() > 0.8 * (r1[:, 2] >= 0).sum()
     np.testing.assert_allclose(r3s[both_s, 2], 3.0 * r1[both_s, 2], rtol=1e-4)
     assert not np.allclose(r3s[both_s, 4], r1[both_s, 4], rtol=1e-3)
 
@@ -696,3 +700,109 @@ def test_input_errors():
         dm.update(kf, np.eye(4), np.ones((48, 64), bool))
     with pytest.raises(InputError):
         DepthConfig(ssd_reduction="max")
+
+
+# ================================================================================== LSD-SLAM oracle
+GOLDEN = Path(__file__).parent / "data" / "lsd_stereo_golden.json"
+
+
+def test_line_stereo_matches_lsd_slam_release_build(sample_dir):
+    """500 line-stereo searches recorded from LSD-SLAM itself (tools/lsd_oracle, release build) on the shipped
+    7-Scenes frames 0 (keyframe) and 31, each pixel searched around its hypothesis as ``observeDepthUpdate``
+    does: successes (unpadded, uncropped segments, whose step count is not decided by rounding), ambiguous
+    (−2), not found (−3) and out-of-bounds (−1) results, the last mostly at the image border where a near
+    end outside the image makes the pixel out of bounds. dmtrack must give the same outcome, and the same
+    inverse depth and variance where both succeed. (About 3 % of the failures sit on a rounding coin flip —
+    whether a padded 3-px segment ends with its 6th step — and may differ.)"""
+    g = json.loads(GOLDEN.read_text())
+    cam = PinholeCamera(585.0, 585.0, 320.0, 240.0, 640, 480)
+
+    def load(i):
+        img = cv2.imread(str(sample_dir / f"frame-{i:06d}.color.jpg"), cv2.IMREAD_GRAYSCALE)
+        return build_frame(i, float(i), img, img.astype(np.float32)[..., None], cam, n_levels=1)
+
+    kf, fr = load(g["keyframe"]), load(g["frame"])
+    T_kf = np.eye(4)
+    T_kf[:3, :] = np.array(g["T_frame_to_keyframe"])
+    geo = dk.stereo_geometry(585.0, 585.0, 320.0, 240.0, np.linalg.inv(T_kf), g["initial_tracked_residual"])
+    prm = dk.make_params(DepthConfig())
+    lv = kf.levels[0]
+    same = close = both = 0
+    codes = {}
+    for p in g["pixels"]:
+        x, y = p["x"], p["y"]
+        ok, ex, ey = dk.epl_check_reference(lv.gx, lv.gy, x, y, geo, prm, 1.0)
+        assert ok, (x, y)
+        sv = float(np.sqrt(np.float32(p["var_s"])))
+        lo = max(0.0, float(np.float32(p["idepth_s"]) - 2 * sv))
+        hi = min(20.0, float(np.float32(p["idepth_s"]) + 2 * sv))
+        err, idepth, var, _ = dk.line_stereo_numba(
+            lv.feat, fr.levels[0].feat, lv.gx, lv.gy, float(x), float(y), ex, ey, lo, p["idepth_s"], hi, geo, prm, 1.0
+        )
+        lsd_code = p["err"] if p["err"] < 0 else 0.0
+        code = err if err < 0 else 0.0
+        same += lsd_code == code
+        codes[lsd_code] = codes.get(lsd_code, 0) + 1
+        if p["err"] >= 0 and err >= 0:
+            both += 1
+            close += abs(idepth - p["idepth"]) <= 1e-3 * abs(p["idepth"]) and abs(var - p["var"]) <= 1e-3 * p["var"]
+    assert codes == {0.0: 150, -1.0: 150, -2.0: 100, -3.0: 100}
+    assert same >= 0.95 * len(g["pixels"]), same  # measured 484 / 500
+    assert both >= 0.97 * codes[0.0] and close == both, (both, close)
+
+
+def test_near_end_outside_the_image_is_out_of_bounds():
+    """LSD-SLAM (release build): when the near end of the search segment lies beyond the 7-px border, its
+    move-back-and-re-test cannot pass, so the search is out of bounds (−1) — even where a moved segment would
+    still have been long enough. Same search away from the border succeeds."""
+    cam = _camera(128, 96)
+    kf, _ = _frame(0, cam, np.eye(4))
+    T_wc = _pose((0.0, 0.0, 0.0), (-0.04, 0.0, 0.0))  # camera moves left: matches move right in the frame
+    fr, _ = _frame(1, cam, T_wc)
+    geo = dk.stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, np.linalg.inv(T_wc), 0.0)
+    prm = dk.make_params(DepthConfig())
+    lv = kf.levels[0]
+    results = {}
+    for x, y, ex, ey in _candidates(kf, geo, prm, 1.0):
+        args = (lv.feat, fr.levels[0].feat, lv.gx, lv.gy, float(x), float(y), ex, ey, 0.0, 1.0, 20.0, geo, prm, 1.0)
+        results[(x, y)] = dk.line_stereo_numba(*args)[0]
+        if x > cam.width - 7 - 29:
+            assert dk.line_stereo_reference(*args)[0] == -1.0
+    # the segment is cropped to 30 px from the far end (idepth 0 = the pixel itself, pure translation): from
+    # x ≥ w − 7 − 31 (30 px + the one-step extension) its near end leaves the image
+    near_border = [e for (x, _), e in results.items() if x > cam.width - 7 - 29]
+    inside = [e for (x, y), e in results.items() if 10 < x < cam.width - 7 - 34 and 10 < y < cam.height - 10]
+    assert near_border and all(e == -1.0 for e in near_border)
+    assert inside and np.mean([e != -1.0 for e in inside]) > 0.95
+
+
+def test_update_variance_modes():
+    """``depth.update_variance``: a map 10 % off in inverse depth whose smoothed variance is over-confident
+    (σ_smoothed = 0.01, raw σ = 0.22). "smoothed" (LSD-SLAM) searches only ±2σ_smoothed (padded to 3 px)
+    around the wrong value: part of the pixels match inside that window, pass the consistency test and are
+    fused, reinforcing the error; "raw-search" searches ±2σ_raw, finds the true match more often and flags it
+    inconsistent instead (fewer reinforcing updates); "raw" also tests with σ_raw and moves the estimates to
+    the truth. Kernel and reference agree in every mode."""
+    cam = _camera(64, 48)
+    kf, z0 = _frame(0, cam, np.eye(4))
+    T_wc = _motion(6)
+    fr, _ = _frame(6, cam, T_wc)
+    truth = (1.0 / z0).astype(np.float32)
+    out = {}
+    for mode in ("smoothed", "raw-search", "raw"):
+        dm = DepthMap(DepthConfig(update_variance=mode))
+        dm.initialize_from_depth(kf, 1.1 * truth, var=0.05, validity=20.0)
+        dm.idepth_var_smoothed[dm.valid] = 1e-4
+        ref = _as_reference(dm)
+        counts = dm.observe(fr, np.linalg.inv(T_wc))
+        assert counts == ref.observe(fr, np.linalg.inv(T_wc))
+        _assert_states_equal(dm, ref)
+        updated = dm.valid & (dm.idepth_var < 0.05)
+        rel = np.abs(dm.idepth[updated] / truth[updated] - 1.0)
+        out[mode] = (counts, int(updated.sum()), float(np.median(rel)))
+    (c_s, n_s, e_s), (c_rs, n_rs, e_rs), (c_r, n_r, e_r) = out["smoothed"], out["raw-search"], out["raw"]
+    assert c_s["inconsistent"] > 0.2 * c_s["update_attempted"] and c_rs["inconsistent"] >= c_s["inconsistent"]
+    assert n_rs < 0.9 * n_s and e_rs <= e_s  # measured 317 vs 414 fused, median error 2.9 % vs 3.3 %
+    assert c_r["inconsistent"] == 0 and n_r > 2 * n_s and e_r < 0.02  # measured 933 fused, error 1.3 %
+    with pytest.raises(InputError, match="update_variance"):
+        DepthConfig(update_variance="median")

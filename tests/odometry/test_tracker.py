@@ -377,3 +377,11 @@ def test_input_errors(grey: Pair) -> None:
         Tracker().track(ref, ff1, np.eye(4))
     with pytest.raises(InputError, match="match"):
         TrackingReference.from_keyframe(fk, np.zeros((4, 4), np.float32), np.zeros((4, 4), np.float32))
+
+
+def test_level_4_only_evaluates_by_default(grey: Pair) -> None:
+    """LSD-SLAM's SlamSystem sets maxItsPerLvl to 0 from level 4 up: the coarsest level is evaluated (for the
+    divergence test and Gray-A's first estimate) but not optimised."""
+    res = track(grey)
+    assert res.iterations[4] == 0 and res.evaluations[4] == 1
+    assert all(res.iterations[lv] > 0 for lv in (3, 2, 1))

@@ -237,7 +237,8 @@ def test_config_defaults_overrides_and_yaml(tmp_path) -> None:
 
     c = VOConfig()
     assert (c.tracker.huber_d, c.tracker.camera_pixel_noise2, c.tracker.convergence_eps) == (3.0, 16.0, 0.999)
-    assert c.tracker.levels == (4, 3, 2, 1) and c.tracker.max_its == (5, 20, 50, 100, 100)
+    # LSD-SLAM's VO: SE3Tracker's {5, 20, 50, 100, 100} with level 4 set to 0 by SlamSystem; map lag 1
+    assert c.tracker.levels == (4, 3, 2, 1) and c.tracker.max_its == (5, 20, 50, 100, 0) and c.map_lag == 1
     assert (c.keyframe.kf_dist_weight, c.keyframe.kf_usage_weight, c.keyframe.threshold) == (3.0, 4.0, 0.14)
     assert (c.depth.min_use_grad, c.depth.max_var, c.depth.var_random_init_initial) == (5.0, 0.25, 0.125)
     assert VOConfig.from_dict(c.to_dict()) == c
@@ -245,7 +246,7 @@ def test_config_defaults_overrides_and_yaml(tmp_path) -> None:
     assert o.tracker.huber_d == 2.0 and o.tracker.levels == (3, 2, 1) and o.depth.ssd_reduction == "mean"
     assert o.seed == 7 and c.tracker.huber_d == 3.0
     assert c.with_overrides("keyframe.loss_not_good_after=null").keyframe.loss_not_good_after is None
-    for bad in ("tracker.nope=1", "tracker.huber_d", "tracker.affine=3", "depth.ssd_reduction=median"):
+    for bad in ("tracker.nope=1", "tracker.huber_d", "tracker.affine=3", "depth.ssd_reduction=median", "map_lag=-1"):
         with pytest.raises(InputError):
             c.with_overrides(bad)
     p = tmp_path / "vo.yaml"
@@ -258,3 +259,31 @@ def test_config_defaults_overrides_and_yaml(tmp_path) -> None:
     assert str(p) in str(ei.value) and "hubr_d" in str(ei.value)
     with pytest.raises(InputError):
         VOConfig.from_yaml(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize(("lag", "gap"), [(1, 8), (0, 7)])
+def test_lsd_slam_schedule_map_lag_and_keyframe_cadence(seq, frames, lag, gap) -> None:
+    """LSD-SLAM's VO with blocking, single-threaded mapping tracks frame n while frame n−1 is still being mapped
+    (tools/lsd_oracle found it; docs/lsd-slam-fidelity.md): frame n is tracked — and its keyframe test reads
+    numMapped and meanIdepth — against the keyframe's map through frame n−2, or as created if the keyframe is
+    younger (map_lag = 1). With the keyframe threshold at 0 every frame that may become a keyframe does, which
+    shows the cadence: a keyframe needs more than min_mapped (5) frames mapped into it, i.e. keyframes come
+    min_mapped + 2 + map_lag frames apart (LSD-SLAM: 8)."""
+    cfg = VOConfig(init="groundtruth", map_lag=lag, keyframe=KeyframeConfig(threshold=0.0))
+    vo = VisualOdometry(CAMERA, cfg)
+    used: list[tuple[int, int]] = []
+    original = vo._snapshot_for
+
+    def spy(index: int):
+        snap = original(index)
+        used.append((index, snap.frame))
+        return snap
+
+    vo._snapshot_for = spy  # type: ignore[method-assign]
+    results = [vo.process(f.index, f.timestamp, f.image, grey(f.image), f.depth if i == 0 else None)
+               for i, f in enumerate(frames[:30])]  # fmt: skip
+    kfs = [r.index for r in results if r.is_keyframe]
+    assert kfs == list(range(0, 30, gap)), kfs
+    for index, snap_frame in used:
+        current_kf = max(k for k in kfs if k < index)
+        assert snap_frame == max(current_kf, index - 1 - lag), (index, snap_frame)

@@ -83,7 +83,8 @@ P_REG_DIST_VAR = 24
 P_ALLOW_NEG = 25
 P_SUBPIXEL = 26
 P_PIX_NOISE2 = 27
-N_PARAMS = 28
+P_UPDATE_VAR = 28  # 0: smoothed (LSD-SLAM), 1: raw-search, 2: raw (see DepthConfig.update_variance)
+N_PARAMS = 29
 
 # indices into the stereo geometry vector ``geo`` (other = keyframe, this = reference frame)
 G_FX, G_FY, G_CX, G_CY = 0, 1, 2, 3
@@ -138,6 +139,10 @@ N_PCOUNTS = 6
 PCOUNT_NAMES = ("attempts", "out_of_bounds", "dropped_not_good", "occluded", "created", "merged")
 
 
+#: Values of ``DepthConfig.update_variance``, in the order of their code in ``prm[P_UPDATE_VAR]``.
+UPDATE_VARIANCE_MODES = ("smoothed", "raw-search", "raw")
+
+
 def make_params(cfg) -> np.ndarray:
     """Pack a :class:`~dmtrack.odometry.config.DepthConfig` into the float64 parameter vector ``prm``.
 
@@ -172,6 +177,7 @@ def make_params(cfg) -> np.ndarray:
     p[P_ALLOW_NEG] = 1.0 if cfg.allow_negative_idepths else 0.0
     p[P_SUBPIXEL] = 1.0 if cfg.use_subpixel_stereo else 0.0
     p[P_PIX_NOISE2] = cfg.camera_pixel_noise2
+    p[P_UPDATE_VAR] = UPDATE_VARIANCE_MODES.index(cfg.update_variance)
     return p
 
 
@@ -495,25 +501,10 @@ def _line_stereo(
     if pfar_x <= b or pfar_x >= w - b or pfar_y <= b or pfar_y >= h - b:
         return -1.0, nan, nan, nan
     if pclose_x <= b or pclose_x >= w - b or pclose_y <= b or pclose_y >= h - b:
-        # move the near point back along the line onto the border (the clamped coordinate is set
-        # exactly; LSD-SLAM re-tests it with the strict test it just failed, a float-rounding coin flip)
-        if pclose_x <= b:
-            pclose_y += (b - pclose_x) / incx * incy
-            pclose_x = b
-        elif pclose_x >= w - b:
-            pclose_y += (w - b - pclose_x) / incx * incy
-            pclose_x = w - b
-        if pclose_y <= b:
-            pclose_x += (b - pclose_y) / incy * incx
-            pclose_y = b
-        elif pclose_y >= h - b:
-            pclose_x += (h - b - pclose_y) / incy * incx
-            pclose_y = h - b
-        fincx = pclose_x - pfar_x
-        fincy = pclose_y - pfar_y
-        new_len = math.sqrt(fincx * fincx + fincy * fincy)
-        if not (pclose_x >= b and pclose_x <= w - b and pclose_y >= b and pclose_y <= h - b) or new_len < 8.0:
-            return -1.0, nan, nan, nan
+        # LSD-SLAM moves the near point back along the line onto the border and re-tests it with the same strict
+        # test (≤ border / ≥ size − border): the moved coordinate lands on the border value itself (up to float32
+        # rounding of a step it cannot overshoot), so the re-test fails — in effect the pixel is out of bounds
+        return -1.0, nan, nan, nan
 
     # search along the line, starting at infinity (pFar). win[j] holds the reference-frame sample at
     # offset 2 − j from cp (j = 0: +2 … j = 4: −2), the same order as the keyframe samples kfv.
@@ -644,9 +635,13 @@ def _line_stereo(
         grad_post_post = best_post - best_diff_post
         interp_pre = False
         interp_post = False
-        if best_pre < 0 or best_post < 0:
-            pass  # best at an end of the search segment: no interpolation
-        elif (grad_post_this < 0) ^ (grad_pre_this < 0):
+        # LSD-SLAM's release build: a best match at an end of the segment has no real neighbour on that side
+        # (errPre = −1 and DiffErrPre = NaN at the first step; errPost = DiffErrPost = −1 at the last); its
+        # test for that case is compiled out with the debug statistics, so the gradient tests below run on
+        # those values (NaN compares false). At the first step this can interpolate towards the second sample;
+        # at the last step it can give interpPost with d = 1 and an error of exactly −1, which the callers
+        # treat as "out of bounds".
+        if (grad_post_this < 0) ^ (grad_pre_this < 0):
             pass  # zero crossing exactly in between
         elif (grad_pre_pre < 0) ^ (grad_pre_this < 0):
             if not ((grad_post_post < 0) ^ (grad_post_this < 0)):
@@ -818,7 +813,16 @@ def _observe_impl(
                     counts[y, C_CREATED] += 1
                 else:
                     # ---------------- update
-                    sv = math.sqrt(np.float64(var_s[y, x]))
+                    # variance bounding the search interval (±2σ around the smoothed idepth) and the consistency
+                    # test: LSD-SLAM uses the regularised one; "raw-search" / "raw" take the pixel's own variance
+                    # where it is larger (see DepthConfig.update_variance)
+                    var_search = np.float64(var_s[y, x])
+                    var_test = var_search
+                    if prm[P_UPDATE_VAR] != 0.0 and var[y, x] > var_search:
+                        var_search = np.float64(var[y, x])
+                        if prm[P_UPDATE_VAR] == 2.0:
+                            var_test = var_search
+                    sv = math.sqrt(var_search)
                     ids = np.float64(idepth_s[y, x])
                     lo = ids - sv * prm[P_EPL_VAR_FAC]
                     hi = ids + sv * prm[P_EPL_VAR_FAC]
@@ -845,7 +849,7 @@ def _observe_impl(
                             blacklisted[y, x] -= 1
                     elif err == -3.0 or err == -4.0:
                         counts[y, C_NOT_FOUND] += 1
-                    elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_s[y, x]:
+                    elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_test:
                         counts[y, C_INCONSISTENT] += 1
                         nv = var[y, x] * prm[P_FAIL_VAR_INC]
                         var[y, x] = nv
@@ -1408,18 +1412,7 @@ def line_stereo_reference(
     if np.any(pfar <= lo) or np.any(pfar >= hi):
         return (-1.0, *fail)
     if np.any(pclose <= lo) or np.any(pclose >= hi):
-        # move the near point inside along the line (x first, then y), then re-test
-        # (the clamped coordinate is set exactly to the border, see the kernel)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for axis in (0, 1):
-                for bound, out in ((lo[axis], pclose[axis] <= lo[axis]), (hi[axis], pclose[axis] >= hi[axis])):
-                    if out:
-                        other = 1 - axis
-                        pclose[other] += (bound - pclose[axis]) / inc[axis] * inc[other]
-                        pclose[axis] = bound
-                        break
-        if not (np.all(pclose >= lo) and np.all(pclose <= hi)) or np.hypot(*(pclose - pfar)) < 8.0:
-            return (-1.0, *fail)
+        return (-1.0, *fail)  # the near point is outside (LSD-SLAM's move-and-re-test fails, see the kernel)
 
     # search positions: start at pFar, step inc, while still before pClose (always at least one)
     positions = []
@@ -1456,16 +1449,19 @@ def line_stereo_reference(
 
     best = cps[ib].copy()
     did_subpixel = False
-    if prm[P_SUBPIXEL] != 0.0 and 0 < ib < len(cost) - 1:
-        e_pre, e_post = cost[ib - 1], cost[ib + 1]
-        c_pre, c_post = cross[ib], cross[ib + 1]
+    if prm[P_SUBPIXEL] != 0.0:
+        # the neighbours of the best step; at an end of the segment the values LSD-SLAM's loop leaves there
+        # (see the kernel): before the first step errPre = −1, DiffErrPre = NaN; after the last errPost =
+        # DiffErrPost = −1
+        e_pre, c_pre = (cost[ib - 1], cross[ib]) if ib > 0 else (-1.0, np.nan)
+        e_post, c_post = (cost[ib + 1], cross[ib + 1]) if ib < len(cost) - 1 else (-1.0, -1.0)
         g_pre_pre = -(e_pre - c_pre)
         g_pre_this = best_err - c_pre
         g_post_this = -(best_err - c_post)
         g_post_post = e_post - c_post
-        cross_pre = (g_pre_pre < 0) != (g_pre_this < 0)
-        cross_post = (g_post_post < 0) != (g_post_this < 0)
-        between = (g_post_this < 0) != (g_pre_this < 0)
+        cross_pre = bool(g_pre_pre < 0) != bool(g_pre_this < 0)
+        cross_post = bool(g_post_post < 0) != bool(g_post_this < 0)
+        between = bool(g_post_this < 0) != bool(g_pre_this < 0)
         if not between and cross_pre and not cross_post:
             d = g_pre_this / (g_pre_this - g_pre_pre)
             best -= d * inc
@@ -1570,7 +1566,12 @@ def observe_reference(
                 counts[C_CREATED] += 1
                 continue
             ids = float(idepth_s[y, x])
-            sv = float(np.sqrt(np.float64(var_s[y, x])))
+            var_search = var_test = float(var_s[y, x])
+            if prm[P_UPDATE_VAR] != 0.0 and float(var[y, x]) > var_search:  # see DepthConfig.update_variance
+                var_search = float(var[y, x])
+                if prm[P_UPDATE_VAR] == 2.0:
+                    var_test = var_search
+            sv = float(np.sqrt(var_search))
             lo = max(0.0, ids - sv * prm[P_EPL_VAR_FAC])
             hi = min(max_id, ids + sv * prm[P_EPL_VAR_FAC])
             counts[C_UPDATE_ATTEMPTED] += 1
@@ -1590,7 +1591,7 @@ def observe_reference(
                     blacklisted[y, x] -= 1
             elif err in (-3.0, -4.0):
                 counts[C_NOT_FOUND] += 1
-            elif DIFF_FAC_OBSERVE * (rid - ids) ** 2 > rvar + float(var_s[y, x]):
+            elif DIFF_FAC_OBSERVE * (rid - ids) ** 2 > rvar + var_test:
                 counts[C_INCONSISTENT] += 1
                 nv = float(var[y, x]) * prm[P_FAIL_VAR_INC]
                 var[y, x] = nv

@@ -25,11 +25,10 @@ class TrackerConfig:
 
     levels: tuple[int, ...] = (4, 3, 2, 1)
     """Pyramid levels visited, coarse to fine (``SE3TRACKING_MAX_LEVEL``-1 … ``SE3TRACKING_MIN_LEVEL``)."""
-    max_its: tuple[int, ...] = (5, 20, 50, 100, 100)
-    """LM iterations per level, indexed by level (LSD-SLAM ``maxItsPerLvl`` = {5, 20, 50, 100, 100}; level 0
-    is not tracked). Note: lsd-slam-spec.md §2 says level 4 only evaluates (0 iterations); LSD-SLAM's code
-    (``SE3Tracker::trackFrame``, ``DenseDepthTrackerSettings``) gives it 100. ``(5, 20, 50, 100, 0)`` gives
-    the spec's schedule."""
+    max_its: tuple[int, ...] = (5, 20, 50, 100, 0)
+    """LM iterations per level, indexed by level: SE3Tracker's ``maxItsPerLvl`` = {5, 20, 50, 100, 100} with
+    level 4 set to 0 by ``SlamSystem``'s constructor ("do not use more than 4 levels for odometry tracking"), so
+    level 4 only evaluates the residual; level 0 is not tracked."""
     lambda_initial: float = 0.0
     """Initial LM damping (``lambdaInitial``)."""
     step_size_min: float = 1e-8
@@ -145,10 +144,24 @@ class DepthConfig:
     """``useSubpixelStereo``."""
     min_tracking_idepth: float = -0.05
     """Hypotheses with idepth_smoothed below this are not used for tracking."""
+    update_variance: Literal["smoothed", "raw-search", "raw"] = "raw-search"
+    """Which inverse-depth variance of a hypothesis bounds its update's stereo search (idepth_smoothed ± 2σ) and the
+    consistency test of the result. ``"smoothed"``: the regularised variance, as LSD-SLAM. It is 1/Σ of the
+    inverse variances of up to 25 neighbours, as if they were independent observations, although they come
+    from the same frames and poses; after one small-baseline observation it narrows the search to a few
+    hundredths of inverse depth around an estimate made with a still poor pose, and the map can lock into a
+    wrong structure (on 7-Scenes 4–6 of 10 random initialisations, in LSD-SLAM as in dmtrack).
+    ``"raw-search"`` (default): the search interval uses the pixel's own (raw) variance where it is larger; the
+    consistency test stays LSD-SLAM's. ``"raw"``: both use it. Measured over 10 seeds in
+    docs/lsd-slam-fidelity.md; the tracker's point weights always use the smoothed variance."""
     ssd_reduction: Literal["sum", "mean"] = "sum"
     """How SSD-type costs reduce over channels: "sum" (squared L2) or "mean" (divided by N)."""
 
     def __post_init__(self) -> None:
+        if self.update_variance not in ("smoothed", "raw-search", "raw"):
+            raise InputError(
+                f"depth.update_variance must be 'smoothed', 'raw-search' or 'raw', not {self.update_variance!r}"
+            )
         if self.ssd_reduction not in ("sum", "mean"):
             raise InputError(f"depth.ssd_reduction must be 'sum' or 'mean', not {self.ssd_reduction!r}")
 
@@ -182,6 +195,11 @@ class VOConfig:
     """Number of pyramid levels built per frame (0..pyramid_levels−1)."""
     seed: int = 0
     """Seed of the random depth initialisation."""
+    map_lag: int = 1
+    """Frames by which the map the tracker uses lags the mapping: frame n is tracked against (and its keyframe
+    test sees numMapped and meanIdepth of) the keyframe's depth map as mapped through frame n − 1 − map_lag, or
+    as created if the keyframe is younger. 1 is what LSD-SLAM's VO does with single-threaded, blocking mapping
+    (its tracker runs while the previous frame is still being mapped); 0 is strictly sequential."""
     stop_on_loss: bool = True
     """Stop processing at the first tracking loss (the paper counts tracked frames until failure)."""
     init: str = "random"
@@ -192,6 +210,8 @@ class VOConfig:
     def __post_init__(self) -> None:
         if self.init not in ("random", "groundtruth"):
             raise InputError(f"init must be 'random' or 'groundtruth', not {self.init!r}")
+        if self.map_lag < 0:
+            raise InputError(f"map_lag must be ≥ 0, got {self.map_lag}")
         if self.pyramid_levels < 1:
             raise InputError("pyramid_levels must be ≥ 1")
         if max(self.tracker.levels) >= self.pyramid_levels:

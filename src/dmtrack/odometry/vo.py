@@ -5,23 +5,33 @@ Per frame (:meth:`VisualOdometry.process`):
 1. build the feature pyramid (:func:`~dmtrack.odometry.frame.build_frame`);
 2. the first frame becomes keyframe 0 (pose identity) with a seeded random depth map;
 3. every later frame is tracked against the current keyframe (:class:`~dmtrack.odometry.tracker.Tracker`),
-   starting from the previous frame's pose relative to that keyframe (constant position);
+   starting from the previous frame's pose relative to that keyframe (constant position), and against the
+   keyframe's map as it was ``map_lag`` frames earlier (see *Schedule*);
 4. tracking is *lost* when the tracker diverged, or — once more than ``keyframe.loss_not_good_after``
    keyframes exist — when its quality test fails; the frame gets no pose, is not mapped, and (with
    ``stop_on_loss``) the odometry stops;
-5. new keyframe when the current one has been mapped more than ``keyframe.min_mapped`` times and
+5. new keyframe when the current one had been mapped more than ``keyframe.min_mapped`` times and
    (|t_kf|·meanIdepth)²·KFDistWeight² + (1 − pointUsage)²·KFUsageWeight² > ``keyframe.threshold``
-   (t_kf = frame position in keyframe coordinates): the frame becomes the keyframe, its depth is propagated
-   from the old one (:meth:`DepthMap.create_keyframe`), and its pose chains as Sim(3):
-   S_w,new = S_w,old · Sim3(T_fk⁻¹, ρ) with ρ the new map's mean-inverse-depth normalisation;
-   otherwise the frame is mapped into the keyframe (:meth:`DepthMap.update`).
+   (t_kf = frame position in keyframe coordinates; mapped count and meanIdepth of that same lagged map):
+   the frame becomes the keyframe, its depth is propagated from the old one
+   (:meth:`DepthMap.create_keyframe`), and its pose chains as Sim(3): S_w,new = S_w,old · Sim3(T_fk⁻¹, ρ) with ρ
+   the new map's mean-inverse-depth normalisation; otherwise the frame is mapped into the keyframe
+   (:meth:`DepthMap.update`).
 
-Threads: tracking and mapping stay strictly sequential (frame i is mapped before frame i+1 is tracked, as
-LSD-SLAM with single-threaded mapping); inside them the numba kernels can use several threads (``parallel``,
-``threads``): the tracker's point blocks and the depth map's pixel rows are independent and every sum is
-formed per fixed block and combined in order, so the results are byte-identical for any thread count. On a
-machine whose cores are busy with other work, one thread (``threads=1`` or ``NUMBA_NUM_THREADS=1``) can be
-faster.
+Schedule: frames are processed one after the other, and the map changes only by mapping (frame i is mapped
+before frame i+1 is tracked). With ``map_lag = 1`` (default) frame i+1 is nevertheless tracked — and takes its
+keyframe decision — against the keyframe's map as mapped through frame i−1 (or as created, for a younger
+keyframe). That is LSD-SLAM's VO with single-threaded, "blocking" mapping: its mapping thread takes frame i
+off the queue before mapping it, which releases the tracker, so frame i+1 is read and tracked while frame i is
+still being mapped (observed with the oracle in ``tools/lsd_oracle``; it also gives LSD-SLAM's keyframe cadence,
+at least 8 frames apart). ``map_lag = 0`` is the strictly sequential variant. The map each frame sees depends
+only on the frame index, never on timing, so results are deterministic.
+
+Threads: tracking and mapping run one after the other in the calling thread; inside them the numba kernels
+can use several threads (``parallel``, ``threads``): the tracker's point blocks and the depth map's pixel rows
+are independent and every sum is formed per fixed block and combined in order, so the results are
+byte-identical for any thread count. On a machine whose cores are busy with other work, one thread
+(``threads=1`` or ``NUMBA_NUM_THREADS=1``) can be faster.
 
 Frame poses: T_wc = S_wk · T_fk⁻¹ reduced to SE(3) (rotation without the scale, translation in world units);
 the world unit is the first keyframe's (mean inverse depth 1), up to the drift of the monocular scale.
@@ -163,6 +173,18 @@ class VOResult:
     timings_ms: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass
+class _MapSnapshot:
+    """The current keyframe's map as the tracker and the keyframe test see it, taken after a mapping step."""
+
+    frame: int  # index of the frame whose mapping (or keyframe creation) produced it
+    idepth: np.ndarray
+    var: np.ndarray
+    n_updates: int
+    mean_idepth: float
+    ref: TrackingReference | None = None
+
+
 class VisualOdometry:
     """Deterministic single-process semi-dense VO over N-channel feature maps.
 
@@ -221,7 +243,7 @@ class VisualOdometry:
         self._S_wk = np.eye(4)  # Sim(3) keyframe → world
         self._s_wk = 1.0
         self._T_fk_last = np.eye(4)
-        self._ref: TrackingReference | None = None
+        self._snaps: list[_MapSnapshot] = []  # snapshots of the current keyframe's map, oldest first
         self._stopped_at: int | None = None
         self._finished = False
         # history
@@ -322,13 +344,13 @@ class VisualOdometry:
             return self._initialize(frame, pyramid_ms, depth)
 
         assert self._dm is not None
-        # ---- tracking
+        # ---- tracking, against the map as of frame index − 1 − map_lag (see _snapshot_for)
         t1 = time.perf_counter()
-        if self._ref is None:
-            idepth, var = self._dm.tracking_depth()
-            self._ref = TrackingReference.from_keyframe(self._kf, idepth, var, self._levels, self.use_numba)
+        snap = self._snapshot_for(index)
+        if snap.ref is None:
+            snap.ref = TrackingReference.from_keyframe(self._kf, snap.idepth, snap.var, self._levels, self.use_numba)
         reference_ms = 1e3 * (time.perf_counter() - t1)
-        res = self.tracker.track(self._ref, frame, self._T_fk_last)
+        res = self.tracker.track(snap.ref, frame, self._T_fk_last)
         t2 = time.perf_counter()
         tracking_ms = 1e3 * (t2 - t1)
         self._t_sum["tracking"] += tracking_ms
@@ -358,10 +380,8 @@ class VisualOdometry:
         # ---- keyframe selection and mapping
         kcfg = self.config.keyframe
         new_kf = False
-        if self._dm.n_updates > kcfg.min_mapped:
-            score = keyframe_score(
-                T_fk, self._dm.mean_idepth, res.point_usage, kcfg.kf_dist_weight, kcfg.kf_usage_weight
-            )
+        if snap.n_updates > kcfg.min_mapped:
+            score = keyframe_score(T_fk, snap.mean_idepth, res.point_usage, kcfg.kf_dist_weight, kcfg.kf_usage_weight)
             new_kf = score > kcfg.threshold
         t3 = time.perf_counter()
         if new_kf:
@@ -369,7 +389,7 @@ class VisualOdometry:
         else:
             self._dm.update(frame, T_fk, res.ref_pixel_was_good, res.initial_tracked_residual)
             self._T_fk_last = T_fk
-            self._ref = None
+            self._take_snapshot(int(index))
         mapping_ms = 1e3 * (time.perf_counter() - t3)
         self._t_sum["mapping"] += mapping_ms
         return FrameResult(
@@ -394,7 +414,8 @@ class VisualOdometry:
         self._S_wk = np.eye(4)
         self._s_wk = 1.0
         self._T_fk_last = np.eye(4)
-        self._ref = None
+        self._snaps = []
+        self._take_snapshot(int(frame.index))
         self._keyframes.append(KeyframeRecord(0, frame.index, frame.timestamp, np.eye(4), 1.0, 1.0))
         mapping_ms = 1e3 * (time.perf_counter() - t0)
         self._t_sum["mapping"] += mapping_ms
@@ -413,12 +434,36 @@ class VisualOdometry:
         self._kf, self._dm = frame, new_dm
         self._kf_id = old_id + 1
         self._T_fk_last = np.eye(4)
-        self._ref = None
+        self._snaps = []
+        self._take_snapshot(int(frame.index))
         self._keyframes.append(
             KeyframeRecord(
                 self._kf_id, frame.index, frame.timestamp, _se3_part(self._S_wk, self._s_wk), self._s_wk, rho
             )
         )
+
+    def _take_snapshot(self, index: int) -> None:
+        """Record the current keyframe's map after mapping frame ``index`` (keep what a later frame may use)."""
+        assert self._dm is not None
+        idepth, var = self._dm.tracking_depth()
+        self._snaps.append(_MapSnapshot(index, idepth, var, self._dm.n_updates, self._dm.mean_idepth))
+        del self._snaps[: -(self.config.map_lag + 1)]
+
+    def _snapshot_for(self, index: int) -> _MapSnapshot:
+        """The map frame ``index`` is tracked against and its keyframe test sees.
+
+        The newest snapshot taken after mapping a frame ≤ index − 1 − map_lag; when the keyframe is younger than
+        that, its snapshot at creation. With map_lag = 1 this is LSD-SLAM's VO with blockUntilMapped: the
+        mapping thread releases the tracker as soon as it has taken frame n from its queue, so frame n + 1 is
+        tracked (and its keyframe test reads numMappedOnThisTotal and meanIdepth) while frame n is still being
+        mapped, i.e. against the map through frame n − 1 (or the new keyframe's, which is complete before
+        the next frame is tracked).
+        """
+        limit = index - 1 - self.config.map_lag
+        for snap in reversed(self._snaps):
+            if snap.frame <= limit:
+                return snap
+        return self._snaps[0]
 
     def _emit_keyframe(self, kf_id: int, kf: Frame, dm: DepthMap) -> None:
         if self.sink is None:

@@ -177,7 +177,7 @@ class VOResult:
 class _MapSnapshot:
     """The current keyframe's map as the tracker and the keyframe test see it, taken after a mapping step."""
 
-    frame: int  # index of the frame whose mapping (or keyframe creation) produced it
+    frame: int  # processing ordinal (0, 1, …) of the frame whose mapping (or keyframe creation) produced it
     idepth: np.ndarray
     var: np.ndarray
     n_updates: int
@@ -344,9 +344,10 @@ class VisualOdometry:
             return self._initialize(frame, pyramid_ms, depth)
 
         assert self._dm is not None
-        # ---- tracking, against the map as of frame index − 1 − map_lag (see _snapshot_for)
+        # ---- tracking, against the map as of map_lag frames earlier (see _snapshot_for)
         t1 = time.perf_counter()
-        snap = self._snapshot_for(index)
+        ordinal = self._n_frames - 1  # frames given to process() before this one
+        snap = self._snapshot_for(ordinal)
         if snap.ref is None:
             snap.ref = TrackingReference.from_keyframe(self._kf, snap.idepth, snap.var, self._levels, self.use_numba)
         reference_ms = 1e3 * (time.perf_counter() - t1)
@@ -389,7 +390,7 @@ class VisualOdometry:
         else:
             self._dm.update(frame, T_fk, res.ref_pixel_was_good, res.initial_tracked_residual)
             self._T_fk_last = T_fk
-            self._take_snapshot(int(index))
+            self._take_snapshot(ordinal)
         mapping_ms = 1e3 * (time.perf_counter() - t3)
         self._t_sum["mapping"] += mapping_ms
         return FrameResult(
@@ -415,7 +416,7 @@ class VisualOdometry:
         self._s_wk = 1.0
         self._T_fk_last = np.eye(4)
         self._snaps = []
-        self._take_snapshot(int(frame.index))
+        self._take_snapshot(self._n_frames - 1)
         self._keyframes.append(KeyframeRecord(0, frame.index, frame.timestamp, np.eye(4), 1.0, 1.0))
         mapping_ms = 1e3 * (time.perf_counter() - t0)
         self._t_sum["mapping"] += mapping_ms
@@ -435,31 +436,32 @@ class VisualOdometry:
         self._kf_id = old_id + 1
         self._T_fk_last = np.eye(4)
         self._snaps = []
-        self._take_snapshot(int(frame.index))
+        self._take_snapshot(self._n_frames - 1)
         self._keyframes.append(
             KeyframeRecord(
                 self._kf_id, frame.index, frame.timestamp, _se3_part(self._S_wk, self._s_wk), self._s_wk, rho
             )
         )
 
-    def _take_snapshot(self, index: int) -> None:
-        """Record the current keyframe's map after mapping frame ``index`` (keep what a later frame may use)."""
+    def _take_snapshot(self, ordinal: int) -> None:
+        """Record the current keyframe's map after mapping the ``ordinal``-th processed frame (0-based); keep what
+        a later frame may still use."""
         assert self._dm is not None
         idepth, var = self._dm.tracking_depth()
-        self._snaps.append(_MapSnapshot(index, idepth, var, self._dm.n_updates, self._dm.mean_idepth))
+        self._snaps.append(_MapSnapshot(ordinal, idepth, var, self._dm.n_updates, self._dm.mean_idepth))
         del self._snaps[: -(self.config.map_lag + 1)]
 
-    def _snapshot_for(self, index: int) -> _MapSnapshot:
-        """The map frame ``index`` is tracked against and its keyframe test sees.
+    def _snapshot_for(self, ordinal: int) -> _MapSnapshot:
+        """The map the ``ordinal``-th processed frame (0-based) is tracked against and its keyframe test sees.
 
-        The newest snapshot taken after mapping a frame ≤ index − 1 − map_lag; when the keyframe is younger than
-        that, its snapshot at creation. With map_lag = 1 this is LSD-SLAM's VO with blockUntilMapped: the
-        mapping thread releases the tracker as soon as it has taken frame n from its queue, so frame n + 1 is
-        tracked (and its keyframe test reads numMappedOnThisTotal and meanIdepth) while frame n is still being
-        mapped, i.e. against the map through frame n − 1 (or the new keyframe's, which is complete before
-        the next frame is tracked).
+        The newest snapshot taken after mapping a frame processed ≤ ordinal − 1 − map_lag (frames that were lost
+        were not mapped and left none); when the keyframe is younger than that, its snapshot at creation. With
+        map_lag = 1 this is LSD-SLAM's VO with blockUntilMapped: the mapping thread releases the tracker as soon
+        as it has taken frame n from its queue, so frame n + 1 is tracked (and its keyframe test reads
+        numMappedOnThisTotal and meanIdepth) while frame n is still being mapped, i.e. against the map through
+        frame n − 1 (or the new keyframe's, which is complete before the next frame is tracked).
         """
-        limit = index - 1 - self.config.map_lag
+        limit = ordinal - 1 - self.config.map_lag
         for snap in reversed(self._snaps):
             if snap.frame <= limit:
                 return snap

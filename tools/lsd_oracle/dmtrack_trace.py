@@ -31,6 +31,7 @@ import numpy as np
 from dmtrack.datasets import open_sequence
 from dmtrack.features import get_feature
 from dmtrack.geometry.camera import crop_image
+from dmtrack.io.trajectory import Trajectory, write_tum
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.vo import VisualOdometry
@@ -68,14 +69,6 @@ def dump_state(dm: DepthMap, path: Path) -> None:
     arr.tofile(path)
 
 
-def tum_line(t: float, T: np.ndarray) -> str:
-    from dmtrack.geometry.lie import matrix_to_quaternion
-
-    q = matrix_to_quaternion(T[:3, :3])
-    p = T[:3, 3]
-    return f"{t:.0f} {p[0]:.12g} {p[1]:.12g} {p[2]:.12g} {q[0]:.12g} {q[1]:.12g} {q[2]:.12g} {q[3]:.12g}\n"
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("sequence")
@@ -105,8 +98,6 @@ def main(argv: list[str] | None = None) -> int:
         dump.mkdir(parents=True, exist_ok=True)
     mb = cfg.depth.min_blacklist
     out = Path(a.out)
-    traj = open(f"{out}.txt", "w")
-    kfs = open(f"{out}_kf.txt", "w")
     trace = open(f"{out}_trace.jsonl", "w")
     kf_frames: list[int] = []
     for i in range(n):
@@ -164,14 +155,14 @@ def main(argv: list[str] | None = None) -> int:
                     dump_state(vo.depth_map, dump / f"post_{i:06d}.bin")
                     np.asarray(tr.ref_pixel_was_good, np.uint8).tofile(dump / f"good_{i:06d}.bin")
         trace.write(json.dumps(rec) + "\n")
-        if res.T_wc is not None:
-            traj.write(tum_line(i, res.T_wc))
         if res.is_keyframe:
-            kfs.write(tum_line(i, res.T_wc))
             kf_frames.append(i)
-    vo.finish()
-    for f in (traj, kfs, trace):
-        f.close()
+    trace.close()
+    r = vo.finish()
+    # timestamps = frame indices, as lsd_oracle writes them
+    write_tum(f"{out}.txt", Trajectory(r.indices.astype(np.float64), r.poses))
+    kf_poses = np.array([k.T_wc for k in r.keyframes]).reshape(-1, 4, 4)
+    write_tum(f"{out}_kf.txt", Trajectory(np.array([k.frame_index for k in r.keyframes], np.float64), kf_poses))
     print(f"dmtrack_trace: {n} frames, {vo.n_keyframes} keyframes, wrote {out}.txt", file=sys.stderr)
     return 0
 

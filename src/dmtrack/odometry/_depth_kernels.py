@@ -37,6 +37,7 @@ import numpy as np
 from numba import prange
 
 from dmtrack.odometry._fastmath import FASTMATH
+from dmtrack.odometry.config import UPDATE_VARIANCE_MODES
 
 # ------------------------------------------------------------------------------------------ constants
 #: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
@@ -137,10 +138,6 @@ PC_CREATED = 4
 PC_MERGED = 5
 N_PCOUNTS = 6
 PCOUNT_NAMES = ("attempts", "out_of_bounds", "dropped_not_good", "occluded", "created", "merged")
-
-
-#: Values of ``DepthConfig.update_variance``, in the order of their code in ``prm[P_UPDATE_VAR]``.
-UPDATE_VARIANCE_MODES = ("smoothed", "raw-search", "raw")
 
 
 def make_params(cfg) -> np.ndarray:

@@ -78,6 +78,10 @@ class TrackerConfig:
             raise InputError("tracker.huber_d and tracker.camera_pixel_noise2 must be positive")
 
 
+#: Values of ``DepthConfig.update_variance`` (the kernels encode them by position).
+UPDATE_VARIANCE_MODES = ("smoothed", "raw-search", "raw")
+
+
 @dataclass(frozen=True)
 class DepthConfig:
     """Semi-dense inverse-depth map on the keyframe (LSD-SLAM ``DepthMap``), lsd-slam-spec.md §3."""
@@ -158,7 +162,7 @@ class DepthConfig:
     """How SSD-type costs reduce over channels: "sum" (squared L2) or "mean" (divided by N)."""
 
     def __post_init__(self) -> None:
-        if self.update_variance not in ("smoothed", "raw-search", "raw"):
+        if self.update_variance not in UPDATE_VARIANCE_MODES:
             raise InputError(
                 f"depth.update_variance must be 'smoothed', 'raw-search' or 'raw', not {self.update_variance!r}"
             )

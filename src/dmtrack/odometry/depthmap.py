@@ -461,10 +461,16 @@ class DepthMap:
             Smoothed inverse depth and variance of valid hypotheses with idepth_smoothed ≥ −0.05; −1 (both)
             elsewhere.
         """
+        return self.tracking_snapshot()[:2]
+
+    def tracking_snapshot(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """:meth:`tracking_depth` and :attr:`mean_idepth` from one pass over the map (what ``setDepth`` gives the
+        tracker and the keyframe test)."""
         m = self._tracking_mask()
         d = np.where(m, self.idepth_smoothed, np.float32(-1.0)).astype(np.float32)
         v = np.where(m, self.idepth_var_smoothed, np.float32(-1.0)).astype(np.float32)
-        return d, v
+        mean = float(np.mean(d[m], dtype=np.float64)) if m.any() else float("nan")
+        return d, v, mean
 
     @property
     def mean_idepth(self) -> float:

@@ -447,8 +447,8 @@ class VisualOdometry:
         """Record the current keyframe's map after mapping the ``ordinal``-th processed frame (0-based); keep what
         a later frame may still use."""
         assert self._dm is not None
-        idepth, var = self._dm.tracking_depth()
-        self._snaps.append(_MapSnapshot(ordinal, idepth, var, self._dm.n_updates, self._dm.mean_idepth))
+        idepth, var, mean_idepth = self._dm.tracking_snapshot()
+        self._snaps.append(_MapSnapshot(ordinal, idepth, var, self._dm.n_updates, mean_idepth))
         del self._snaps[: -(self.config.map_lag + 1)]
 
     def _snapshot_for(self, ordinal: int) -> _MapSnapshot:

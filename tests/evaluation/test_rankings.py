@@ -171,3 +171,28 @@ def test_group_rows_keeps_order():
 
 def test_criteria_are_the_papers():
     assert [(c.key, c.higher_is_better) for c in CRITERIA] == [(TRACKED, True), (ROT, False), (TRANS, False)]
+
+
+def test_aggregate_seeds_medians_ranges_and_worst_seed():
+    from dmtrack.evaluation.rankings import aggregate_seeds, median_range
+
+    assert median_range([3.0, None, float("nan"), 1.0, 2.0, 10.0]) == (2.5, 1.0, 10.0, 4)
+    assert median_range([12, 9, 12]) == (12, 9, 12, 3) and median_range([None]) == (None, None, None, 0)
+    runs = [
+        row("s1", "A", 100, 100, 4.0, 1.0, seed=2, status="ok"),
+        row("s1", "A", 60, 100, 1.0, 3.0, seed=0, status="lost", lost_at=60),
+        row("s1", "A", 100, 100, 2.0, None, seed=1, status="ok"),
+        row("s1", "B", 100, 100, 3.0, 5.0, seed=0, status="ok", dataset="D"),
+    ]
+    a, b = aggregate_seeds(runs)
+    assert (a["sequence"], a["feature"], a["seeds"], a["runs"]) == ("s1", "A", [0, 1, 2], 3)
+    assert (a["n_ok"], a["n_lost"], a["n_failed"]) == (2, 1, 0)
+    assert (a[TRACKED], a[f"{TRACKED}_min"], a[f"{TRACKED}_max"]) == (100, 60, 100)
+    assert (a[ROT], a[f"{ROT}_min"], a[f"{ROT}_max"], a[f"{ROT}_n"]) == (2.0, 1.0, 4.0, 3)
+    assert (a[TRANS], a[f"{TRANS}_n"]) == (2.0, 2)  # median of the two defined values
+    assert (a["worst_seed"], a["status"], a["lost_at"], a["worst_tracked_frames"]) == (0, "lost", 60, 60)
+    # one run per cell: the cell row carries the run's values, so the tables are those of the runs
+    assert (b[ROT], b[f"{ROT}_min"], b[f"{ROT}_max"], b["status"], b["dataset"]) == (3.0, 3.0, 3.0, "ok", "D")
+    # rankings on the medians: A's rotation median 2.0 beats B's 3.0 (A's seed 2 alone, 4.0, would lose)
+    assert sequence_ranks([a, b])["s1"]["A"][ROT] == 1
+    assert overall_averages([a, b])[0].tracked_fraction == pytest.approx(1.0)  # median of 1.0, 0.6, 1.0

@@ -52,10 +52,13 @@ def estimate_of(gt: Trajectory, n: int, drift_deg: float, seed: int) -> Trajecto
 
 def make_run(root: Path, seq: str, feature: str, *, metrics: dict | None = None, error: dict | None = None,
              gt: Trajectory | None = None, est: Trajectory | None = None, depth_frames: tuple[int, ...] = (),
-             info: dict | None = None) -> Path:  # fmt: skip
+             info: dict | None = None, seed: int | None = None) -> Path:  # fmt: skip
+    """A finished run in ``runs/<seq>/<feature>/`` (``seed``: in ``.../seed-<S>/``, as a multi-seed bench)."""
     d = root / "runs" / seq / feature
+    if seed is not None:
+        d = d / f"seed-{seed}"
     d.mkdir(parents=True)
-    (d / "spec.json").write_text(json.dumps({"feature": feature, "start": 0, "max_frames": 40, "seed": 0}))
+    (d / "spec.json").write_text(json.dumps({"feature": feature, "start": 0, "max_frames": 40, "seed": seed or 0}))
     (d / "run_info.json").write_text(
         json.dumps(
             info
@@ -74,7 +77,8 @@ def make_run(root: Path, seq: str, feature: str, *, metrics: dict | None = None,
     if metrics is not None:
         m = {"feature": feature, "sequence": seq, "total_frames": 40, "lost_at": None, "channels": 1,
              "width": 64, "height": 48, "start": 0, "r_l": 1 / 3, "feature_ms": 1.0, "io_ms": 0.5,
-             "tracking_ms": 2.0, "mapping_ms": 3.0, "wall_s": 1.0, "fps": 40.0, **metrics}  # fmt: skip
+             "tracking_ms": 2.0, "mapping_ms": 3.0, "wall_s": 1.0, "fps": 40.0, "seed": seed or 0,
+             **metrics}  # fmt: skip
         (d / "metrics.json").write_text(json.dumps(m))
     if gt is not None:
         write_tum(d / "groundtruth.txt", gt)
@@ -236,3 +240,144 @@ def test_topview_basis_spans_the_plane_of_motion():
     assert np.allclose(B @ B.T, np.eye(2), atol=1e-9)
     normal = np.cross(u, v)
     assert np.all(np.abs(B @ normal) < 1e-2)  # both axes lie in the plane
+
+
+# ------------------------------------------------------------------------------------------- several seeds
+SEEDED_KEYS = [f"s1/{f}/seed-{s}" for f in ("gray", "gray-affine", "rgb") for s in (0, 1, 2)]
+
+
+@pytest.fixture()
+def seeded(tmp_path: Path) -> Path:
+    """One 7-Scenes-like sequence × (gray, gray-affine, rgb) × seeds 0, 1, 2.
+
+    gray: rot 10.0 / 1.0 / 1.2 (median 1.2, mean 4.07: ranking on the mean or on seed 0 would lose),
+          trans 4 / 5 / 6, all 40 tracked;
+    gray-affine: rot 2.0 / 2.0 / –, trans 3.0 / 3.1 / –; seed 1 lost at 25, seed 2 crashed;
+    rgb: rot 3.0, trans 7.0 each; seed 1 lost at 12 (12 tracked).
+    """
+    root = tmp_path / "seeded"
+    gt = circle_gt()
+    for s, (rot, trans, ate) in enumerate([(10.0, 4.0, 0.03), (1.0, 5.0, 0.01), (1.2, 6.0, 0.02)]):
+        make_run(root, "s1", "gray", seed=s, metrics={"tracked_frames": 40, "rpe_rot_deg_per_m": rot,
+                 "rpe_trans_angle_deg_per_m": trans, "ate_rmse": ate, "format": "7scenes", "fps": 30.0 + s},
+                 gt=gt, est=estimate_of(gt, 40, 0.1 * (s + 1), s), depth_frames=(0, 12 + s))  # fmt: skip
+    make_run(root, "s1", "gray-affine", seed=0, metrics={"tracked_frames": 40, "rpe_rot_deg_per_m": 2.0,
+             "rpe_trans_angle_deg_per_m": 3.0, "format": "7scenes"},
+             gt=gt, est=estimate_of(gt, 40, 0.2, 0))  # fmt: skip
+    make_run(root, "s1", "gray-affine", seed=1, metrics={"tracked_frames": 25, "lost_at": 25, "lost_reason": "diverged",
+             "rpe_rot_deg_per_m": 2.0, "rpe_trans_angle_deg_per_m": 3.1, "format": "7scenes"},
+             gt=gt, est=estimate_of(gt, 25, 0.2, 1))  # fmt: skip
+    make_run(root, "s1", "gray-affine", seed=2, error={"type": "RuntimeError", "message": "boom", "tracked_frames": 3})
+    for s in range(3):
+        lost = {"tracked_frames": 12, "lost_at": 12} if s == 1 else {"tracked_frames": 40}
+        make_run(root, "s1", "rgb", seed=s, metrics={**lost, "rpe_rot_deg_per_m": 3.0, "rpe_trans_angle_deg_per_m": 7.0,
+                 "format": "7scenes"})  # fmt: skip
+    bench_json = {"features": ["gray", "gray-affine", "rgb"], "sequences": [{"name": "s1", "dataset": "7-Scenes"}],
+                  "runs": SEEDED_KEYS, "options": {"jobs": 2, "seeds": [0, 1, 2]}}  # fmt: skip
+    (root / "bench.json").write_text(json.dumps(bench_json))
+    return root
+
+
+def test_seeded_runs_are_collected_with_their_seed(seeded: Path):
+    recs = collect_runs(seeded)
+    assert [r.key for r in recs] == SEEDED_KEYS
+    assert [(r.feature, r.seed) for r in recs][:4] == [("gray", 0), ("gray", 1), ("gray", 2), ("gray-affine", 0)]
+    rows = read_csv_rows(seeded)
+    assert [r["seed"] for r in rows] == ["0", "1", "2"] * 3
+    assert rows[5]["status"] == "failed" and rows[5]["seed"] == "2"  # the seed of a crashed run, from its spec
+
+
+def read_csv_rows(root: Path) -> list[dict[str, str]]:
+    write_report(root, figures=False)
+    return read_csv(root / "results.csv")
+
+
+def test_seeded_tables_show_median_range_and_worst_seed(seeded: Path):
+    md = write_report(seeded, figures=False).read_text()
+    assert "3 seeds of the random depth initialisation (0-2)" in md and "median over seeds 0-2" in md
+    # rankings on the per-cell medians (hand computed): tracked 40 / 32.5 / 40, rot 1.2 / 2.0 / 3.0,
+    # trans 5.0 / 3.05 / 7.0
+    assert "| gray | 1 | 1.00 | 1 | 1.00 | 0 | 2.00 |" in md
+    assert "| gray-affine | 0 | 3.00 | 0 | 2.00 | 1 | 1.00 |" in md
+    assert "| rgb | 1 | 1.00 | 0 | 3.00 | 0 | 3.00 |" in md
+    assert ("| s1 | gray | 0-2 | ok (3 of 3) | 40/40 (40–40) | 1 | 1.200 (1.000–10.000) | 1 | 5.000 (4.000–6.000) | 2 "
+            "| 0.0200 (0.0100–0.0300) |") in md  # fmt: skip
+    assert ("| s1 | gray-affine | 0-2 | 1 ok, 1 lost, 1 failed; worst: seed 2 failed | 32.5/40 (25–40) [2 of 3] | 3 "
+            "| 2.000 (2.000–2.000) [2 of 3] | 2 | 3.050 (3.000–3.100) [2 of 3] | 1 |") in md  # fmt: skip
+    assert "| s1 | rgb | 0-2 | 2 ok, 1 lost; worst: seed 1 lost @12, 12/40 tracked | 40/40 (12–40) | 1 |" in md
+    assert "s1 / gray-affine / seed 2: **failed** — RuntimeError: boom" in md
+    assert "traceback in `runs/s1/gray-affine/seed-2/error.json`" in md
+    assert "have not finished" not in md and "Warning" not in md
+
+    cells = {r["feature"]: r for r in read_csv(seeded / "tables" / "cells.csv")}
+    ga = cells["gray-affine"]
+    assert (ga["seeds"], ga["runs"], ga["n_ok"], ga["n_lost"], ga["n_failed"]) == ("0-2", "3", "1", "1", "1")
+    assert (ga["worst_seed"], ga["worst_status"]) == ("2", "failed")
+    assert (float(ga["tracked_frames_median"]), ga["tracked_frames_min"], ga["tracked_frames_max"],
+            ga["tracked_frames_n"]) == (32.5, "25", "40", "2")  # fmt: skip
+    g = cells["gray"]
+    assert (float(g["rpe_rot_deg_per_m_median"]), float(g["rpe_rot_deg_per_m_min"]),
+            float(g["rpe_rot_deg_per_m_max"])) == (1.2, 1.0, 10.0)  # fmt: skip
+    assert (float(g["fps_median"]), float(g["fps_min"]), float(g["fps_max"])) == (31.0, 30.0, 32.0)
+    rgb = cells["rgb"]
+    assert (rgb["worst_seed"], rgb["worst_status"], rgb["worst_tracked_frames"], rgb["worst_lost_at"]) == (
+        "1", "lost", "12", "12")  # fmt: skip
+    averages = {r["feature"]: r for r in read_csv(seeded / "tables" / "averages.csv")}
+    assert float(averages["gray"]["rpe_rot"]) == pytest.approx(1.2) and averages["gray"]["seeds"] == "0-2"
+    assert float(averages["gray-affine"]["tracked_fraction"]) == pytest.approx((1.0 + 25 / 40) / 2)
+    ranks = {r["feature"]: r for r in read_csv(seeded / "tables" / "rankings.csv")}
+    assert ranks["gray"]["rpe_rot_deg_per_m_wins"] == "1" and ranks["gray"]["seeds"] == "0-2"
+
+
+def test_seeded_figures_plot_medians_with_ranges(seeded: Path, monkeypatch: pytest.MonkeyPatch):
+    from dmtrack.evaluation.report import _rpe_curves, representatives
+    from dmtrack.viz import plots
+
+    recs = collect_runs(seeded)
+    assert [(r.feature, r.seed) for r in representatives(recs)] == [("gray", 2), ("gray-affine", 0), ("rgb", 1)]
+    curves = {c.label.split()[0]: c for c in _rpe_curves(recs)}
+    assert curves["gray"].label == "gray [40; 40–40] · 3 seeds"
+    per_seed = np.array([json.loads((seeded / "runs" / "s1" / "gray" / f"seed-{s}" / "evaluation.json").read_text())
+                         ["rpe_rot_per_length"] for s in range(3)], dtype=float)  # fmt: skip
+    assert np.allclose(curves["gray"].rot, np.median(per_seed, axis=0))
+    assert np.allclose(curves["gray"].rot_lo, per_seed.min(axis=0))
+    assert np.allclose(curves["gray"].rot_hi, per_seed.max(axis=0))
+
+    points = []
+    real = plots.save_accuracy_vs_time
+    monkeypatch.setattr(plots, "save_accuracy_vs_time", lambda path, pts, *a: points.extend(pts) or real(path, pts, *a))
+    md = write_report(seeded).read_text()
+    gray = next(p for p in points if p.label == "gray")
+    assert gray.rot == pytest.approx(1.2) and gray.rot_range == pytest.approx((1.0, 10.0))
+    assert gray.trans_range == pytest.approx((4.0, 6.0)) and gray.ms_range is not None
+    for name in ("rpe_s1.png", "trajectory_s1.png", "depth_s1.png", "accuracy_vs_time_7-Scenes.png"):
+        p = seeded / "figures" / name
+        assert p.is_file() and p.stat().st_size > 1000 and f"(figures/{name})" in md
+    assert "Problems while writing" not in md
+    assert "per feature the run of the seed with the median RPE rotation error" in md
+
+
+def test_a_folder_benched_with_one_seed_and_with_several(seeded: Path):
+    """A feature folder holding a single-seed run and seed-<S>/ runs: the report uses the last grid's runs."""
+    gt = circle_gt()
+    d = seeded / "runs" / "s1" / "gray"
+    single = make_run(seeded / "single", "s1", "gray", metrics={"tracked_frames": 40, "rpe_rot_deg_per_m": 99.0,
+                      "rpe_trans_angle_deg_per_m": 9.0, "format": "7scenes"},
+                      gt=gt, est=estimate_of(gt, 40, 0.1, 0))  # fmt: skip
+    for f in single.iterdir():
+        shutil.move(str(f), d / f.name)
+    assert [r.key for r in collect_runs(seeded)] == SEEDED_KEYS  # the grid of bench.json: the seeds
+    bench = json.loads((seeded / "bench.json").read_text())
+    bench["runs"] = ["s1/gray"]
+    (seeded / "bench.json").write_text(json.dumps(bench))
+    recs = collect_runs(seeded)
+    assert [r.key for r in recs if r.feature == "gray"] == ["s1/gray"]
+    assert recs[0].metrics["rpe_rot_deg_per_m"] == 99.0
+
+
+def test_one_seed_per_cell_keeps_the_single_seed_tables(bench: Path):
+    md = write_report(bench, figures=False).read_text()
+    assert "Several seeds" not in md and "| Seeds |" not in md and "(n = number of runs with a value)" in md
+    assert "| s1 | gray | ok | 40/40 | 1 | 1.000 | 1 | 4.000 | 2 | 0.0100 |" in md  # no ranges for one run
+    cells = read_csv(bench / "tables" / "cells.csv")
+    assert len(cells) == 6 and all(c["runs"] == "1" for c in cells)

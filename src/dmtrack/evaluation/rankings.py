@@ -35,11 +35,22 @@ pyramid), ``io_ms`` (reading and decoding images), ``tracking_ms``, ``mapping_ms
 sum (the paper's "feature generation" also counts file I/O); ``fps = 1000 / total_ms``; ``wall_fps`` =
 processed frames / wall-clock seconds of the whole runs.  Each run is weighted by its processed frames
 (``processed_frames``, else ``total_frames``), so the result is the mean over all frames processed.
+
+Several seeds (:func:`aggregate_seeds`)
+---------------------------------------
+A bench run with several seeds of the random depth initialisation has several rows per (sequence, feature)
+*cell*.  :func:`aggregate_seeds` turns them into one row per cell whose metric values are the **medians
+over the seeds** (each over the seeds where the value is defined; the mean of the two middle values for
+an even count), with ``<metric>_min``, ``<metric>_max`` and ``<metric>_n`` beside them, the seeds, how many
+seeds tracked to the end / lost tracking / failed, and the *worst* seed (a failed one, else the fewest
+tracked frames).  All the tables above are then computed on these cell rows — the rankings and wins on the
+per-cell medians; with one seed per cell a cell row carries the run's own values.
 """
 
 from __future__ import annotations
 
 import math
+import statistics
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -260,8 +271,15 @@ def tracked_fraction(row: Row) -> float | None:
     return t / n if t is not None and n is not None and n > 0 else None
 
 
+def _fraction(row: Row) -> float | None:
+    """A row's ``tracked_fraction`` when it has one (a cell row: the median over seeds), else computed."""
+    v = value_of(row, "tracked_fraction")
+    return v if v is not None else tracked_fraction(row)
+
+
 def overall_averages(rows: Sequence[Row], features: Sequence[str] | None = None) -> list[FeatureAverages]:
-    """Table 6: per-feature averages over the sequences of ``rows`` (see the module docstring)."""
+    """Table 6: per-feature averages over the sequences of ``rows`` (see the module docstring); the
+    tracked-frame fraction is a row's ``tracked_fraction`` when given, else ``tracked / total``."""
     feats = _features(rows, features)
     index = _index(rows)
     seqs = ordered_unique(str(r["sequence"]) for r in rows)
@@ -277,7 +295,7 @@ def overall_averages(rows: Sequence[Row], features: Sequence[str] | None = None)
     out = []
     for f in feats:
         mine = [index[(s, f)] for s in seqs if (s, f) in index]
-        frac, n_frac = mean_defined(tracked_fraction(r) for r in mine)
+        frac, n_frac = mean_defined(_fraction(r) for r in mine)
         frames, _ = mean_defined(value_of(r, "tracked_frames") for r in mine)
         rot, n_rot = mean_defined(value_of(r, ROTATION_ERROR.key) for r in mine)
         trans, n_trans = mean_defined(value_of(r, TRANS_ANGLE_ERROR.key) for r in mine)
@@ -349,4 +367,97 @@ def timing_table(rows: Sequence[Row], features: Sequence[str] | None = None) -> 
                 wall_frames / wall if wall > 0 else None,
             )
         )  # fmt: skip
+    return out
+
+
+# ------------------------------------------------------------------------------------------ several seeds
+#: The metrics :func:`aggregate_seeds` summarises per cell (median, min, max and n over the seeds).
+SEED_METRICS: tuple[str, ...] = (
+    "tracked_frames", "tracked_fraction", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse", "fps",
+    "feature_ms", "io_ms", "tracking_ms", "mapping_ms", "total_ms", "wall_s",
+)  # fmt: skip
+#: Columns copied from a cell's first row (they do not depend on the seed).
+_CELL_CONSTANTS = ("dataset", "channels", "width", "height", "start", "r_l", "gt_path_length")
+_STATUS_ORDER = {"failed": 0, "lost": 1, "ok": 2}
+
+
+def median_range(values: Iterable[float | None]) -> tuple[float | None, float | None, float | None, int]:
+    """``(median, min, max, n)`` of the values that are not missing (``(None, None, None, 0)`` if none).
+
+    >>> median_range([3.0, None, 1.0, 2.0, 10.0])
+    (2.5, 1.0, 10.0, 4)
+    >>> median_range([12, 9, 12])
+    (12, 9, 12, 3)
+    """
+    raw = [v for v in values if value_of({"v": v}, "v") is not None]
+    if not raw:
+        return None, None, None, 0
+    xs = [float(v) for v in raw]
+    med, lo, hi = float(statistics.median(xs)), min(xs), max(xs)
+    if all(isinstance(v, int) for v in raw):  # counts stay integers where they can
+        med, lo, hi = (int(x) if x.is_integer() else x for x in (med, lo, hi))
+    return med, lo, hi, len(xs)
+
+
+def _seed_key(row: Row) -> tuple[int, float]:
+    s = value_of(row, "seed")
+    return (0, s) if s is not None else (1, 0.0)
+
+
+def worst_row(rows: Sequence[Row]) -> Row:
+    """The worst run of a cell: a failed one, else a lost one with the fewest tracked frames, else the one with
+    the fewest tracked frames (ties: the lowest seed)."""
+
+    def badness(r: Row) -> tuple[int, float, tuple[int, float]]:
+        tracked = value_of(r, "tracked_frames")
+        return (_STATUS_ORDER.get(str(r.get("status")), 0), -1.0 if tracked is None else tracked, _seed_key(r))
+
+    return min(rows, key=badness)
+
+
+def aggregate_seeds(rows: Iterable[Row], metrics: Sequence[str] = SEED_METRICS) -> list[dict[str, Any]]:
+    """One row per (sequence, feature) cell of a table with one row per run and seed (see the module docstring).
+
+    Parameters
+    ----------
+    rows : runs with ``sequence``, ``feature``, ``seed``, ``status`` (``"ok"``, ``"lost"`` or ``"failed"``) and
+        the ``metrics`` (missing values are left out of the medians).
+    metrics : the columns to summarise.
+
+    Returns
+    -------
+    list[dict]
+        In order of first appearance: ``sequence``, ``feature``, the seed-independent columns of the first
+        row (``dataset``, ``channels``…), ``seeds`` (sorted list), ``runs``, ``n_ok``, ``n_lost``,
+        ``n_failed``; per metric ``m``: ``m`` (the median), ``m_min``, ``m_max``, ``m_n``; ``total_frames``
+        and ``processed_frames`` (medians); ``status`` and ``lost_at`` of the worst run and ``worst_seed``,
+        ``worst_status``, ``worst_tracked_frames``, ``worst_lost_at``.
+    """
+    cells: dict[tuple[str, str], list[Row]] = {}
+    for r in rows:
+        cells.setdefault((str(r["sequence"]), str(r["feature"])), []).append(r)
+    out = []
+    for (seq, feat), runs in cells.items():
+        runs = sorted(runs, key=_seed_key)
+        cell: dict[str, Any] = {"sequence": seq, "feature": feat}
+        for k in _CELL_CONSTANTS:
+            cell[k] = next((r.get(k) for r in runs if r.get(k) is not None), None)
+        seeds = [r.get("seed") for r in runs]
+        cell["seeds"] = sorted(int(s) for s in seeds if value_of({"s": s}, "s") is not None)
+        cell["runs"] = len(runs)
+        for status in ("ok", "lost", "failed"):
+            cell[f"n_{status}"] = sum(1 for r in runs if r.get("status") == status)
+        for m in metrics:
+            med, lo, hi, n = median_range(r.get(m) for r in runs)
+            cell.update({m: med, f"{m}_min": lo, f"{m}_max": hi, f"{m}_n": n})
+        for k in ("total_frames", "processed_frames"):
+            cell[k] = median_range(r.get(k) for r in runs)[0]
+        worst = worst_row(runs)
+        cell["worst_seed"] = worst.get("seed")
+        cell["worst_status"] = worst.get("status")
+        cell["worst_tracked_frames"] = worst.get("tracked_frames")
+        cell["worst_lost_at"] = worst.get("lost_at")
+        cell["status"] = worst.get("status")
+        cell["lost_at"] = worst.get("lost_at")
+        out.append(cell)
     return out

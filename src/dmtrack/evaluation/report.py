@@ -1,14 +1,22 @@
 """The benchmark report: ``report.md``, ``results.csv``, ``tables/*.csv`` and ``figures/*.png`` of a bench folder.
 
-:func:`write_report` reads the finished runs under ``DIR/runs/<sequence>/<feature>/`` (those with a
-``metrics.json``, or an ``error.json`` for a crashed run; unfinished folders are ignored) and writes
+:func:`write_report` reads the finished runs under ``DIR/runs/<sequence>/<feature>/`` and, for a bench with
+several seeds, ``DIR/runs/<sequence>/<feature>/seed-<S>/`` (those with a ``metrics.json``, or an
+``error.json`` for a crashed run; unfinished folders are ignored) and writes
 
-* ``results.csv`` — one row per run (:data:`RESULT_COLUMNS`);
+* ``results.csv`` — one row per run (:data:`RESULT_COLUMNS`; ``seed`` says which seed);
+* ``tables/cells.csv`` — one row per (sequence, feature) cell: the median, min, max and n over the seeds of
+  every metric, the seeds, how many lost tracking or failed and the worst seed (:data:`CELL_COLUMNS`);
 * ``tables/rankings.csv`` (Tables 2–5), ``tables/ranks_per_sequence.csv``, ``tables/averages.csv``
-  (Table 6), ``tables/timings.csv`` (Table 7) — one block of rows per dataset;
+  (Table 6), ``tables/timings.csv`` (Table 7) — one block of rows per dataset, computed on the per-cell
+  medians (:func:`dmtrack.evaluation.rankings.aggregate_seeds`; with one seed, the runs' values), with the
+  ``seeds`` they are medians over in their last column;
 * ``figures/`` — RPE against path length per sequence (Figure 1), accuracy against time per dataset
   (Figure 5), keyframe depth maps per sequence (Figure 4), top-view trajectories per sequence;
-* ``report.md`` — all of it as a results section, figures linked relatively.
+* ``report.md`` — all of it as a results section, figures linked relatively.  With several seeds a cell
+  shows ``median (min–max)`` and says how many of its seeds lost tracking and which seed did worst; the
+  figures plot the median with min–max error bars, and the trajectory and depth figures show, per feature,
+  the run of the seed with the median RPE rotation error.
 
 Sequences are grouped into datasets (one ranking table each) by the ``dataset`` given in the sequences
 file, else by format and name (:func:`dmtrack.experiments.runner.dataset_label`).  Rankings, averages and
@@ -21,6 +29,7 @@ import csv
 import io
 import math
 import re
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -32,9 +41,12 @@ import numpy as np
 from dmtrack import __version__
 from dmtrack.evaluation.rankings import (
     CRITERIA,
+    SEED_METRICS,
     FeatureAverages,
     FeatureRanking,
+    aggregate_seeds,
     group_rows,
+    median_range,
     ordered_unique,
     overall_averages,
     ranking_table,
@@ -64,12 +76,15 @@ class RunRecord:
 
     Attributes
     ----------
-    sequence, feature : names (the run folder is ``runs/<sequence>/<feature>``).
+    sequence, feature : names (the run folder is ``runs/<sequence>/<feature>``, or
+        ``runs/<sequence>/<feature>/seed-<S>`` in a bench with several seeds).
     path : the run folder.
     spec, metrics, error, evaluation, info : the contents of ``spec.json``, ``metrics.json``,
         ``error.json``, ``evaluation.json`` and ``run_info.json`` (``None`` / ``{}`` where absent).
     dataset : the dataset group.
     unit : the ground truth's length unit (per-metre values are per this unit).
+    seed : the seed of the random depth initialisation the run used (``None`` if not recorded).
+    key : the run folder relative to ``runs/`` (``"<sequence>/<feature>[/seed-<S>]"``).
     """
 
     sequence: str
@@ -82,6 +97,12 @@ class RunRecord:
     info: dict[str, Any]
     dataset: str
     unit: str = "m"
+    seed: int | None = None
+    key: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.key:
+            self.key = f"{self.sequence}/{self.path.name}"
 
     @property
     def status(self) -> str:
@@ -97,13 +118,29 @@ def _read_json(path: Path) -> Any:
     return read_json(path)
 
 
-def collect_runs(bench_dir: str | Path) -> list[RunRecord]:
-    """The finished runs of a bench folder, in the bench's sequence and feature order.
+def _run_seed(spec: dict[str, Any], metrics: dict[str, Any] | None) -> int | None:
+    """The seed a run used: its spec's, else the one its metrics.json records, else its configuration's."""
+    from dmtrack.experiments.runner import effective_seed
 
-    A run folder counts when it holds a readable ``metrics.json`` (finished, possibly with a tracking loss)
-    or ``error.json`` (crashed); hidden (temporary) folders and unfinished runs are ignored.
+    for v in (spec.get("seed"), (metrics or {}).get("seed"), effective_seed(spec) if spec else None):
+        if v is not None and not isinstance(v, bool):
+            try:
+                return int(v)
+            except (TypeError, ValueError):
+                continue
+    return None
+
+
+def collect_runs(bench_dir: str | Path) -> list[RunRecord]:
+    """The finished runs of a bench folder, in the bench's sequence and feature order, then by seed.
+
+    A run folder (``runs/<sequence>/<feature>/`` or, with several seeds, ``runs/<sequence>/<feature>/seed-<S>/``)
+    counts when it holds a readable ``metrics.json`` (finished, possibly with a tracking loss) or
+    ``error.json`` (crashed); hidden (temporary) folders and unfinished runs are ignored.  A feature folder
+    that holds both a run and ``seed-<S>/`` runs (benched with one seed and with several) gives the runs of
+    the last bench's grid (``bench.json``): the single run if that grid lists it, else the seeds' runs.
     """
-    from dmtrack.experiments.runner import dataset_label, length_unit
+    from dmtrack.experiments.runner import SEED_DIR, dataset_label, length_unit
 
     root = Path(bench_dir)
     bench = _read_json(root / "bench.json") or {}
@@ -111,38 +148,58 @@ def collect_runs(bench_dir: str | Path) -> list[RunRecord]:
     units = {s.get("name"): s.get("unit") for s in bench.get("sequences", []) if isinstance(s, dict)}
     seq_order = [s.get("name") for s in bench.get("sequences", []) if isinstance(s, dict)]
     feat_order = list(bench.get("features", []))
+    planned = set(bench.get("runs") or [])
     records = []
     runs = root / "runs"
     if not runs.is_dir():
         return []
+
+    def load(seq_dir: Path, run_dir: Path, key: str) -> RunRecord | None:
+        metrics = _read_json(run_dir / "metrics.json")
+        error = _read_json(run_dir / "error.json") if metrics is None else None
+        if not isinstance(metrics, dict) and not isinstance(error, dict):
+            return None
+        spec = _read_json(run_dir / "spec.json") or {}
+        spec = spec if isinstance(spec, dict) else {}
+        info = _read_json(run_dir / "run_info.json") or {}
+        evaluation = _read_json(run_dir / "evaluation.json")
+        m = metrics if isinstance(metrics, dict) else {}
+        feature = str(spec.get("feature") or m.get("feature") or key.split("/")[1])
+        fmt, name = m.get("format") or spec.get("format"), m.get("sequence") or seq_dir.name
+        dataset = datasets.get(seq_dir.name) or info.get("dataset") or dataset_label(fmt, name)
+        unit = units.get(seq_dir.name) or info.get("unit") or length_unit(fmt, name)
+        return RunRecord(seq_dir.name, feature, run_dir, spec, metrics if isinstance(metrics, dict) else None,
+                         error if isinstance(error, dict) else None,
+                         evaluation if isinstance(evaluation, dict) else None, info, str(dataset), str(unit),
+                         _run_seed(spec, m), key)  # fmt: skip
+
     for seq_dir in sorted(runs.iterdir()):
         if not seq_dir.is_dir() or seq_dir.name.startswith("."):
             continue
-        for run_dir in sorted(seq_dir.iterdir()):
-            if not run_dir.is_dir() or run_dir.name.startswith("."):
+        for feat_dir in sorted(seq_dir.iterdir()):
+            if not feat_dir.is_dir() or feat_dir.name.startswith("."):
                 continue
-            metrics = _read_json(run_dir / "metrics.json")
-            error = _read_json(run_dir / "error.json") if metrics is None else None
-            if not isinstance(metrics, dict) and not isinstance(error, dict):
-                continue
-            spec = _read_json(run_dir / "spec.json") or {}
-            info = _read_json(run_dir / "run_info.json") or {}
-            evaluation = _read_json(run_dir / "evaluation.json")
-            feature = str(spec.get("feature") or (metrics or {}).get("feature") or run_dir.name)
-            m = metrics if isinstance(metrics, dict) else {}
-            fmt, name = m.get("format") or spec.get("format"), m.get("sequence") or seq_dir.name
-            dataset = datasets.get(seq_dir.name) or info.get("dataset") or dataset_label(fmt, name)
-            unit = units.get(seq_dir.name) or info.get("unit") or length_unit(fmt, name)
-            records.append(
-                RunRecord(seq_dir.name, feature, run_dir, spec, metrics if isinstance(metrics, dict) else None,
-                          error if isinstance(error, dict) else None,
-                          evaluation if isinstance(evaluation, dict) else None, info, str(dataset), str(unit))
-            )  # fmt: skip
+            key = f"{seq_dir.name}/{feat_dir.name}"
+            single = load(seq_dir, feat_dir, key)
+            seeded = [
+                rec
+                for d in sorted(feat_dir.iterdir())
+                if d.is_dir() and SEED_DIR.match(d.name)
+                for rec in [load(seq_dir, d, f"{key}/{d.name}")]
+                if rec is not None
+            ]
+            if single is not None and seeded:
+                if key in planned:
+                    seeded = []
+                else:
+                    single = None
+            records += ([single] if single is not None else []) + seeded
 
     def order(name: str, known: list[str]) -> tuple[int, str]:
         return (known.index(name), "") if name in known else (len(known), name)
 
-    records.sort(key=lambda r: (order(r.sequence, seq_order), order(r.feature, feat_order)))
+    records.sort(key=lambda r: (order(r.sequence, seq_order), order(r.feature, feat_order),
+                                (0, r.seed) if r.seed is not None else (1, 0), r.key))  # fmt: skip
     return records
 
 
@@ -163,7 +220,7 @@ def results_rows(records: Iterable[RunRecord]) -> list[dict[str, Any]]:
         ev = r.evaluation or {}
         row: dict[str, Any] = {c: None for c in RESULT_COLUMNS}
         row.update({k: m.get(k) for k in RESULT_COLUMNS if k in m})
-        row.update(dataset=r.dataset, sequence=r.sequence, feature=r.feature, status=r.status,
+        row.update(dataset=r.dataset, sequence=r.sequence, feature=r.feature, status=r.status, seed=r.seed,
                    run_dir=str(r.path), host=r.info.get("host"))  # fmt: skip
         if r.metrics is None:
             row["start"] = r.spec.get("start")
@@ -235,18 +292,76 @@ def _plural(n: int, word: str) -> str:
 
 
 # ================================================================================================ figures
+def _by_feature(records: Sequence[RunRecord]) -> dict[str, list[RunRecord]]:
+    out: dict[str, list[RunRecord]] = {}
+    for r in records:
+        out.setdefault(r.feature, []).append(r)
+    return out
+
+
+def _range_text(values: Sequence[Any]) -> str:
+    """``"12"`` for one value, ``"12; 9–12"`` (median; min–max) for several."""
+    med, lo, hi, n = median_range(values)
+    if n == 0:
+        return "–"
+    if n == 1:
+        return _fmt(med, 1)
+    return f"{_fmt(med, 1)}; {_fmt(lo, 1)}–{_fmt(hi, 1)}"
+
+
 def _rpe_curves(records: Sequence[RunRecord]) -> list[Any]:
+    """One curve per feature: a run's per-length RPE, or with several seeds the per-length median over the
+    seeds (lengths L_k matched by k) with the min–max as bounds."""
     from dmtrack.viz.plots import RpeCurve
 
     curves = []
-    for r in records:
-        ev = r.evaluation or {}
-        if r.metrics is None or "rpe_lengths" not in ev:
+    for feature, runs in _by_feature(records).items():
+        per_run = []
+        for r in runs:
+            ev = r.evaluation or {}
+            if r.metrics is None or "rpe_lengths" not in ev:
+                continue
+            per_run.append([np.asarray([np.nan if v is None else v for v in ev[k]], dtype=float)
+                            for k in ("rpe_lengths", "rpe_rot_per_length", "rpe_trans_per_length")])  # fmt: skip
+        if not per_run:
             continue
-        arr = [np.asarray([np.nan if v is None else v for v in ev[k]], dtype=float)
-               for k in ("rpe_lengths", "rpe_rot_per_length", "rpe_trans_per_length")]  # fmt: skip
-        curves.append(RpeCurve(f"{r.feature} [{r.metrics.get('tracked_frames')}]", arr[0], arr[1], arr[2]))
+        tracked = _range_text([r.metrics.get("tracked_frames") for r in runs if r.metrics is not None])
+        if len(runs) == 1:
+            x, rot, trans = per_run[0]
+            curves.append(RpeCurve(f"{feature} [{tracked}]", x, rot, trans))
+            continue
+        k = min(len(a[0]) for a in per_run)
+        stack = np.stack([np.stack([a[i][:k] for a in per_run]) for i in range(3)])  # (3, runs, k)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a length without any value stays NaN
+            med = np.nanmedian(stack, axis=1)
+            lo, hi = np.nanmin(stack, axis=1), np.nanmax(stack, axis=1)
+        label = f"{feature} [{tracked}] · {_plural(len(runs), 'seed')}"
+        curves.append(RpeCurve(label, med[0], med[1], med[2], lo[1], hi[1], lo[2], hi[2]))
     return curves
+
+
+def representatives(records: Sequence[RunRecord]) -> list[RunRecord]:
+    """Per feature, the run that stands for its cell in the trajectory and depth figures: the only run, or
+    with several seeds the finished run with the median RPE rotation error (the lower of the two middle
+    ones for an even count; without RPE values, the most tracked frames, then the lowest seed)."""
+    out = []
+    for runs in _by_feature(records).values():
+        done = [r for r in runs if r.metrics is not None]
+        if not done:
+            continue
+        rated = sorted((v, r.seed if r.seed is not None else -1, i) for i, r in enumerate(done)
+                       if (v := value_of(r.metrics, "rpe_rot_deg_per_m")) is not None)  # fmt: skip
+        if rated:
+            out.append(done[rated[(len(rated) - 1) // 2][2]])
+        else:
+            out.append(max(done, key=lambda r: (value_of(r.metrics, "tracked_frames") or 0, -(r.seed or 0))))
+    return out
+
+
+def _run_label(r: RunRecord, seeded: bool) -> str:
+    tracked = (r.metrics or {}).get("tracked_frames")
+    return f"{r.feature} seed {r.seed} [{tracked}]" if seeded else f"{r.feature} [{tracked}]"
 
 
 def _read_positions(path: Path) -> np.ndarray | None:
@@ -261,7 +376,9 @@ def _read_positions(path: Path) -> np.ndarray | None:
         return None
 
 
-def _trajectory_inputs(records: Sequence[RunRecord]) -> tuple[np.ndarray | None, list[tuple[str, np.ndarray]]]:
+def _trajectory_inputs(
+    records: Sequence[RunRecord], seeded: bool = False
+) -> tuple[np.ndarray | None, list[tuple[str, np.ndarray]]]:
     gt = None
     for r in records:
         g = _read_positions(r.path / "groundtruth.txt")
@@ -276,15 +393,18 @@ def _trajectory_inputs(records: Sequence[RunRecord]) -> tuple[np.ndarray | None,
         if p is None or len(p) == 0:
             continue
         A = np.asarray(ev["ate_alignment"], dtype=float)
-        estimates.append((f"{r.feature} [{r.metrics.get('tracked_frames')}]", p @ A[:3, :3].T + A[:3, 3]))
+        estimates.append((_run_label(r, seeded), p @ A[:3, :3].T + A[:3, 3]))
     return gt, estimates
 
 
 _KF_RE = re.compile(r"kf_(\d+)_frame_(\d+)\.png$")
 
 
-def _depth_grid(records: Sequence[RunRecord], n_cols: int = 4) -> tuple[list[tuple[str, list[Any]]], list[str]]:
-    """Rows (feature, cells) and column titles: the reference keyframe of each feature at a few frames."""
+def _depth_grid(
+    records: Sequence[RunRecord], n_cols: int = 4, seeded: bool = False
+) -> tuple[list[tuple[str, list[Any]]], list[str]]:
+    """Rows (feature, cells) and column titles: the reference keyframe of each run (one per feature) at a few
+    frames (``seeded``: rows labelled with the run's seed)."""
     from dmtrack.viz.plots import DepthCell
 
     kfs: dict[str, list[tuple[int, int, Path]]] = {}
@@ -297,7 +417,7 @@ def _depth_grid(records: Sequence[RunRecord], n_cols: int = 4) -> tuple[list[tup
             if m:
                 items.append((int(m.group(2)), int(m.group(1)), p))
         if items:
-            kfs[r.feature] = sorted(items)
+            kfs[f"{r.feature} (seed {r.seed})" if seeded else r.feature] = sorted(items)
     if not kfs:
         return [], []
     frames = sorted({f for items in kfs.values() for f, _, _ in items})
@@ -322,10 +442,12 @@ def _depth_grid(records: Sequence[RunRecord], n_cols: int = 4) -> tuple[list[tup
 
 
 # ================================================================================================ tables
-def _ranking_csv_rows(dataset: str, table: Sequence[FeatureRanking]) -> list[dict[str, Any]]:
+def _ranking_csv_rows(
+    dataset: str, table: Sequence[FeatureRanking], seeds: dict[str, str] | None = None
+) -> list[dict[str, Any]]:
     out = []
     for fr in table:
-        row: dict[str, Any] = {"dataset": dataset, "feature": fr.feature}
+        row: dict[str, Any] = {"dataset": dataset, "feature": fr.feature, "seeds": (seeds or {}).get(fr.feature)}
         for c in CRITERIA:
             row[f"{c.key}_wins"] = fr.wins[c.key]
             row[f"{c.key}_average_rank"] = fr.average_rank[c.key]
@@ -334,20 +456,101 @@ def _ranking_csv_rows(dataset: str, table: Sequence[FeatureRanking]) -> list[dic
     return out
 
 
-RANKING_COLUMNS = ("dataset", "feature") + tuple(
-    f"{c.key}_{s}" for c in CRITERIA for s in ("wins", "average_rank", "sequences")
+RANKING_COLUMNS = (
+    ("dataset", "feature")
+    + tuple(f"{c.key}_{s}" for c in CRITERIA for s in ("wins", "average_rank", "sequences"))
+    + ("seeds",)
 )
+# ``runs`` in averages.csv / timings.csv counts cells (sequences): with several seeds, a cell is the median of
+# its seeds' runs.  ``seeds`` (last column of every table) lists the seeds the values are medians over.
 AVERAGE_COLUMNS = ("dataset", "feature", "runs", "tracked_fraction", "n_tracked", "tracked_frames", "rpe_rot",
                    "n_rpe_rot", "rpe_trans", "n_rpe_trans", "ate", "n_ate", "common_rpe_rot", "common_rpe_trans",
-                   "n_common")  # fmt: skip
+                   "n_common", "seeds")  # fmt: skip
 TIMING_COLUMNS = ("dataset", "feature", "runs", "frames", "feature_ms", "io_ms", "tracking_ms", "mapping_ms",
-                  "total_ms", "fps", "wall_fps")  # fmt: skip
+                  "total_ms", "fps", "wall_fps", "seeds")  # fmt: skip
+RANKS_PER_SEQUENCE_COLUMNS = ("dataset", "sequence", "feature") + tuple(f"{c.key}_rank" for c in CRITERIA) + ("seeds",)
+#: Columns of ``tables/cells.csv``: one row per (sequence, feature) cell; per metric of
+#: :data:`~dmtrack.evaluation.rankings.SEED_METRICS` its median, min and max over the seeds and n (seeds with a
+#: value); ``worst_*`` describe the worst seed (a failed one, else the fewest tracked frames).
+CELL_COLUMNS = ("dataset", "sequence", "feature", "seeds", "runs", "n_ok", "n_lost", "n_failed", "total_frames",
+                "worst_seed", "worst_status", "worst_tracked_frames", "worst_lost_at") + tuple(
+    f"{m}_{s}" for m in SEED_METRICS for s in ("median", "min", "max", "n")
+)  # fmt: skip
 
 
-def _dc_rows(dataset: str, items: Sequence[Any]) -> list[dict[str, Any]]:
+def _cell_csv_rows(cells: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    from dmtrack.experiments.runner import format_seeds
+
+    out = []
+    for c in cells:
+        row = {k: c.get(k) for k in CELL_COLUMNS if k in c}
+        row["seeds"] = format_seeds(c["seeds"])
+        for m in SEED_METRICS:
+            row[f"{m}_median"] = c.get(m)
+        out.append(row)
+    return out
+
+
+def _cell_value(c: dict[str, Any], key: str, digits: int, after: str = "") -> str:
+    """A cell's median of ``key`` (then ``after``), with several seeds followed by ``(min–max)`` and, when
+    only some seeds have a value, ``[k of n]``."""
+    med = c.get(key)
+    if med is None:
+        return "–"
+    text = _fmt(med, digits) + after
+    if c.get("runs", 1) > 1:
+        n = c.get(f"{key}_n", 0)
+        if n > 1:
+            text += f" ({_fmt(c[f'{key}_min'], digits)}–{_fmt(c[f'{key}_max'], digits)})"
+        if n < c["runs"]:
+            text += f" [{n} of {c['runs']}]"
+    return text
+
+
+def _cell_status(c: dict[str, Any]) -> str:
+    """``ok`` / ``lost @N`` / ``failed`` for one run; with several seeds the counts and the worst seed, e.g.
+    ``2 ok, 1 lost; worst: seed 2 lost @14, 14/25 tracked``."""
+    if c.get("runs", 1) <= 1:
+        return str(c["status"]) + (f" @{c['lost_at']}" if c.get("lost_at") is not None else "")
+    if c["n_ok"] == c["runs"]:
+        return f"ok ({c['runs']} of {c['runs']})"
+    counts = ", ".join(f"{c[f'n_{s}']} {s}" for s in ("ok", "lost", "failed") if c[f"n_{s}"])
+    if c["worst_status"] == "failed":
+        worst = f"seed {c['worst_seed']} failed"
+    else:
+        worst = (f"seed {c['worst_seed']} lost @{c['worst_lost_at']}, "
+                 f"{_fmt(c['worst_tracked_frames'])}/{_fmt(c['total_frames'])} tracked")  # fmt: skip
+    return f"{counts}; worst: {worst}"
+
+
+def _dc_rows(dataset: str, items: Sequence[Any], seeds: dict[str, str] | None = None) -> list[dict[str, Any]]:
     from dataclasses import asdict
 
-    return [{"dataset": dataset, **asdict(x)} for x in items]
+    return [{"dataset": dataset, **asdict(x), "seeds": (seeds or {}).get(x.feature)} for x in items]
+
+
+def _common_sequences(cells: Sequence[dict[str, Any]], features: Sequence[str]) -> set[str]:
+    """The sequences where every feature has both RPE values (as in ``overall_averages``)."""
+    by = {(c["sequence"], c["feature"]): c for c in cells}
+    return {
+        s
+        for s in ordered_unique(c["sequence"] for c in cells)
+        if all(value_of(by.get((s, f)), k) is not None for f in features
+               for k in ("rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m"))
+    }  # fmt: skip
+
+
+def _mean_range(cells: Sequence[dict[str, Any]], key: str, weighted: bool = False) -> tuple[float, float] | None:
+    """The mean over ``cells`` (with a value of ``key``) of their minima and of their maxima over the seeds;
+    ``weighted``: frame-weighted like the timings (cells without ``tracking_ms`` left out)."""
+    lo_num = hi_num = den = 0.0
+    for c in cells:
+        lo, hi = value_of(c, f"{key}_min"), value_of(c, f"{key}_max")
+        if lo is None or hi is None or (weighted and value_of(c, "tracking_ms") is None):
+            continue
+        w = (value_of(c, "processed_frames") or value_of(c, "total_frames") or 0.0) if weighted else 1.0
+        lo_num, hi_num, den = lo_num + w * lo, hi_num + w * hi, den + w
+    return (lo_num / den, hi_num / den) if den > 0 else None
 
 
 # ================================================================================================ report
@@ -402,6 +605,7 @@ def write_report(
 
     A figure that cannot be drawn is reported in ``report.md`` (and to ``log``) instead of failing the report.
     """
+    from dmtrack.experiments.runner import format_seeds
     from dmtrack.io.trajectory import _atomic_write
 
     root = Path(bench_dir)
@@ -410,6 +614,16 @@ def write_report(
     features = feature_order(records, root)
     rows = results_rows(records)
     write_csv(root / "results.csv", rows, RESULT_COLUMNS)
+    # one row per (sequence, feature) cell: the median over its seeds (the run itself with one seed)
+    cells = aggregate_seeds(rows)
+    write_csv(root / "tables" / "cells.csv", _cell_csv_rows(cells), CELL_COLUMNS)
+    seeded = any(c["runs"] > 1 for c in cells)
+    all_seeds = sorted({s for c in cells for s in c["seeds"]})
+    cell_of = {(c["sequence"], c["feature"]): c for c in cells}
+
+    def seeds_of(cs: Iterable[dict[str, Any]]) -> str:
+        return format_seeds({s for c in cs for s in c["seeds"]})
+
     problems: list[str] = []
 
     def figure(make: Callable[[], Path], what: str) -> Path | None:
@@ -433,7 +647,7 @@ def write_report(
             if old.name.startswith(FIGURE_PREFIXES):
                 old.unlink(missing_ok=True)
 
-    by_dataset = group_rows(rows, "dataset")
+    by_dataset = group_rows(cells, "dataset")
     rec_by_seq: dict[str, list[RunRecord]] = {}
     for r in records:
         rec_by_seq.setdefault(r.sequence, []).append(r)
@@ -450,9 +664,18 @@ def write_report(
         f"({', '.join(features) or 'none'}); {n_ok} tracked to the end, {n_lost} lost tracking, {n_failed} failed. "
         f"Report generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}.\n"
     )
+    if seeded:
+        md.append(
+            f"**Several seeds:** the {len(cells)} (sequence, feature) cells were run with "
+            f"{_plural(len(all_seeds), 'seed')} of the random depth initialisation ({format_seeds(all_seeds)}). "
+            "Every table gives per cell the **median over the seeds** and the min–max in brackets; rankings, "
+            "wins, averages and timings are computed on the per-cell medians. One run per seed is in "
+            "`results.csv` and `runs/<sequence>/<feature>/seed-<S>/`; `tables/cells.csv` has the median, min, "
+            "max and n of every metric per cell.\n"
+        )
     md.append(_machine_text(records, bench) + "\n")
     planned = bench.get("runs") or []
-    finished = {f"{r.sequence}/{r.path.name}" for r in records}
+    finished = {r.key for r in records}
     missing = [k for k in planned if k not in finished]
     if missing:
         md.append(f"**{len(missing)} run(s) of the grid have not finished** and are not in this report: "
@@ -500,27 +723,30 @@ def write_report(
     inconsistent = []
     for s in seqs:
         keys = {
-            (r.spec.get("start"), r.spec.get("max_frames"), r.spec.get("seed"), r.spec.get("r_l"),
+            (r.spec.get("start"), r.spec.get("max_frames"), r.spec.get("r_l"),
              str(r.spec.get("config")), r.spec.get("dmtrack_version"))
             for r in rec_by_seq[s]
             if r.spec
         }  # fmt: skip
-        if len(keys) > 1:
+        seed_sets = {tuple(c["seeds"]) for c in cells if c["sequence"] == s}
+        if len(keys) > 1 or len(seed_sets) > 1:
             inconsistent.append(s)
     if inconsistent:
-        md.append(f"**Warning:** the runs of {', '.join(inconsistent)} differ in frame range, seed, r_l, "
+        md.append(f"**Warning:** the runs of {', '.join(inconsistent)} differ in frame range, seeds, r_l, "
                   "configuration or dmtrack version, so their rankings compare unlike runs.\n")  # fmt: skip
 
     all_rank_rows: list[dict[str, Any]] = []
     if len(by_dataset) > 1:
-        overall = ranking_table(rows, features)
+        overall = ranking_table(cells, features)
         md.append("## All datasets\n")
         md.append(_ranking_md(overall) + "\n")
         md.append(f"*Rankings over all {_plural(len(seqs), 'sequence')} of the {len(by_dataset)} datasets (each "
                   "sequence counts once; ranks are unitless, so datasets can be pooled — errors and times cannot, "
                   "see the per-dataset tables).* "
+                  + (f"Medians over seeds {format_seeds(all_seeds)}. " if seeded else "")
                   + "; ".join(f"{c.label} — {_best(overall, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
-        all_rank_rows += _ranking_csv_rows("(all datasets)", overall)
+        all_rank_rows += _ranking_csv_rows("(all datasets)", overall, {f: seeds_of(
+            c for c in cells if c["feature"] == f) for f in features})  # fmt: skip
 
     all_seq_rank_rows: list[dict[str, Any]] = []
     all_avg_rows: list[dict[str, Any]] = []
@@ -535,31 +761,39 @@ def write_report(
         ranks = sequence_ranks(drows, dfeatures)
         averages = overall_averages(drows, dfeatures)
         timings = timing_table(drows, dfeatures)
-        all_rank_rows += _ranking_csv_rows(dataset, ranking)
+        fseeds = {f: seeds_of(c for c in drows if c["feature"] == f) for f in dfeatures}
+        dseeds = seeds_of(drows)
+        all_rank_rows += _ranking_csv_rows(dataset, ranking, fseeds)
         for s, per in ranks.items():
             for f, rk in per.items():
+                c = cell_of.get((s, f))
                 all_seq_rank_rows.append({"dataset": dataset, "sequence": s, "feature": f,
-                                          **{f"{k}_rank": v for k, v in rk.items()}})  # fmt: skip
-        all_avg_rows += _dc_rows(dataset, averages)
-        all_time_rows += _dc_rows(dataset, timings)
+                                          **{f"{k}_rank": v for k, v in rk.items()},
+                                          "seeds": format_seeds(c["seeds"]) if c else None})  # fmt: skip
+        all_avg_rows += _dc_rows(dataset, averages, fseeds)
+        all_time_rows += _dc_rows(dataset, timings, fseeds)
+        over = f" Per cell: median over seeds {dseeds}; the tables below use those medians." if seeded else ""
 
         md.append(f"## {dataset}\n")
         md.append(f"{_plural(len(dseqs), 'sequence')}: {', '.join(dseqs)}. "
-                  + (f"Ground-truth lengths in {unit}; errors in deg/{unit}.\n" if len(dunits) == 1 else
-                     f"**Warning:** its sequences use different length units ({', '.join(dunits)}).\n"))  # fmt: skip
+                  + (f"Ground-truth lengths in {unit}; errors in deg/{unit}." if len(dunits) == 1 else
+                     f"**Warning:** its sequences use different length units ({', '.join(dunits)}).")
+                  + over + "\n")  # fmt: skip
         # rankings
         table_no += 1
         md.append("### Rankings\n")
         md.append(_ranking_md(ranking) + "\n")
         md.append(f"*Table {table_no}. Experimental rankings for the {dataset} dataset "
-                  f"({_plural(len(dseqs), 'sequence')}).* "
+                  f"({_plural(len(dseqs), 'sequence')}"
+                  + (f", ranked by the medians over seeds {dseeds}" if seeded else "") + ").* "
                   + "; ".join(f"{c.label} — {_best(ranking, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
         # averages (Table 6 layout: features as columns)
         table_no += 1
         md.append("### Overall averages\n")
         md.append(_averages_table(averages, unit) + "\n")
         md.append(f"*Table {table_no}. Overall averages among the {_plural(len(dseqs), 'sequence')} of {dataset} "
-                  "(n = number of runs with a value).*\n")  # fmt: skip
+                  + (f"of the per-cell medians over seeds {dseeds} (n = number of cells with a value).*\n" if seeded
+                     else "(n = number of runs with a value).*\n"))  # fmt: skip
         # timings
         table_no += 1
         md.append("### Processing times\n")
@@ -572,45 +806,51 @@ def write_report(
               _fmt(t.wall_fps, 1), t.frames] for t in timings],
         ) + "\n")  # fmt: skip
         md.append(f"*Table {table_no}. Average times per frame on {dataset} (frame-weighted over "
-                  f"{sum(t.runs for t in timings)} runs).*\n")  # fmt: skip
+                  + (f"the per-cell medians over seeds {dseeds} of {sum(t.runs for t in timings)} cells).*\n"
+                     if seeded else f"{sum(t.runs for t in timings)} runs).*\n"))  # fmt: skip
         # per-sequence results
         md.append("### Per-sequence results\n")
         prow = []
-        for r in drows:
-            rk = ranks[r["sequence"]][r["feature"]]
-            prow.append([r["sequence"], r["feature"], r["status"] + (f" @{r['lost_at']}" if r["lost_at"] is not None
-                                                                    else ""),
-                         f"{_fmt(r['tracked_frames'])}/{_fmt(r['total_frames'])}", _fmt(rk.get("tracked_frames")),
-                         _fmt(value_of(r, "rpe_rot_deg_per_m"), 3), _fmt(rk.get("rpe_rot_deg_per_m")),
-                         _fmt(value_of(r, "rpe_trans_angle_deg_per_m"), 3),
-                         _fmt(rk.get("rpe_trans_angle_deg_per_m")), _fmt(value_of(r, "ate_rmse"), 4)])  # fmt: skip
+        for c in drows:
+            rk = ranks[c["sequence"]][c["feature"]]
+            prow.append([c["sequence"], c["feature"]] + ([format_seeds(c["seeds"]) or "–"] if seeded else [])
+                        + [_cell_status(c), _cell_value(c, "tracked_frames", 1, f"/{_fmt(c['total_frames'])}"),
+                           _fmt(rk.get("tracked_frames")), _cell_value(c, "rpe_rot_deg_per_m", 3),
+                           _fmt(rk.get("rpe_rot_deg_per_m")), _cell_value(c, "rpe_trans_angle_deg_per_m", 3),
+                           _fmt(rk.get("rpe_trans_angle_deg_per_m")), _cell_value(c, "ate_rmse", 4),
+                           _cell_value(c, "total_ms", 1), _cell_value(c, "fps", 1)])  # fmt: skip
         md.append(
             _md_table(
-                [
-                    "Sequence",
-                    "Feature",
-                    "Status",
-                    "Tracked",
-                    "Rank",
-                    f"RPE rot. (deg/{unit})",
-                    "Rank",
-                    f"RPE trans. ang. (deg/{unit})",
-                    "Rank",
-                    f"ATE ({unit})",
+                ["Sequence", "Feature"] + (["Seeds"] if seeded else []) + [
+                    "Status", "Tracked", "Rank", f"RPE rot. (deg/{unit})", "Rank", f"RPE trans. ang. (deg/{unit})",
+                    "Rank", f"ATE ({unit})", "Total (ms)", "fps",
                 ],
                 prow,
-                "lllrrrrrrr",
+                ("lll" if seeded else "ll") + "lrrrrrrrrr",
             )
             + "\n"
-        )
+        )  # fmt: skip
+        if seeded:
+            md.append("*Per cell: median over the seeds, min–max in brackets ([k of n]: only k of the n seeds have "
+                      "a value); ranks of the medians. Status: how many seeds tracked to the end, lost tracking or "
+                      "failed, and the worst seed. Total: time per frame; fps: processed frames per wall-clock "
+                      "second of the run.*\n")  # fmt: skip
         # figures
         if figures:
             md.append("### Figures\n")
             pts = []
+            common = _common_sequences(drows, dfeatures)
             for a, t in zip(averages, timings, strict=True):
                 rot, trans = (a.common_rpe_rot, a.common_rpe_trans) if a.n_common else (a.rpe_rot, a.rpe_trans)
                 if t.total_ms:
-                    pts.append(plots.SpeedAccuracy(a.feature, t.total_ms, rot, trans))
+                    ranges: dict[str, Any] = {}
+                    if seeded:
+                        mine = [c for c in drows if c["feature"] == a.feature]
+                        used = [c for c in mine if c["sequence"] in common] if a.n_common else mine
+                        ranges = {"rot_range": _mean_range(used, "rpe_rot_deg_per_m"),
+                                  "trans_range": _mean_range(used, "rpe_trans_angle_deg_per_m"),
+                                  "ms_range": _mean_range(mine, "total_ms", weighted=True)}  # fmt: skip
+                    pts.append(plots.SpeedAccuracy(a.feature, t.total_ms, rot, trans, **ranges))
             note = (
                 f"errors averaged over the {_plural(averages[0].n_common, 'sequence')} where every feature has them"
                 if averages and averages[0].n_common
@@ -630,7 +870,9 @@ def write_report(
                 )
             if p is not None:
                 md.append(f"![accuracy vs time, {dataset}](figures/{p.name})\n")
-                md.append(f"*Accuracy against the total time per frame on {dataset} (paper Figure 5); {note}.*\n")
+                md.append(f"*Accuracy against the total time per frame on {dataset} (paper Figure 5); {note}"
+                          + ("; points from the per-cell medians over the seeds, bars from the per-cell minima and "
+                             "maxima averaged the same way" if seeded else "") + ".*\n")  # fmt: skip
             for s in dseqs:
                 recs = rec_by_seq[s]
                 curves = _rpe_curves(recs)
@@ -641,8 +883,12 @@ def write_report(
                     if p is not None:
                         md.append(f"![RPE against path length, {s}](figures/{p.name})\n")
                         md.append(f"*RPE rotation and translation-angle errors of {s} against the path length "
-                                  "(paper Figure 1); the number of tracked frames in brackets.*\n")  # fmt: skip
-                gt, estimates = _trajectory_inputs(recs)
+                                  "(paper Figure 1); the number of tracked frames in brackets"
+                                  + ("; with several seeds the median over the seeds at each length L_k with "
+                                     "min–max error bars, and the tracked frames as median; min–max"
+                                     if seeded else "") + ".*\n")  # fmt: skip
+                reps = representatives(recs) if seeded else recs
+                gt, estimates = _trajectory_inputs(reps, seeded)
                 if estimates:
                     p = figure(lambda s=s, gt=gt, estimates=estimates, unit=unit: plots.save_trajectories_topview(
                         root / "figures" / f"trajectory_{_slug(s)}.png", gt, estimates,
@@ -650,9 +896,10 @@ def write_report(
                     if p is not None:
                         md.append(f"![trajectories, {s}](figures/{p.name})\n")
                         md.append(f"*Top view of {s}: estimates after Sim(3) alignment to the ground truth "
-                                  "(dashed), projected on the two principal axes of the ground-truth "
-                                  "positions.*\n")  # fmt: skip
-                grid, titles = _depth_grid(recs)
+                                  "(dashed), projected on the two principal axes of the ground-truth positions"
+                                  + ("; per feature the run of the seed with the median RPE rotation error"
+                                     if seeded else "") + ".*\n")  # fmt: skip
+                grid, titles = _depth_grid(reps, seeded=seeded)
                 if grid:
                     p = figure(lambda s=s, grid=grid, titles=titles: plots.save_depth_grid(
                         root / "figures" / f"depth_{_slug(s)}.png", grid, titles, f"{s}: keyframe inverse depth"),
@@ -661,14 +908,12 @@ def write_report(
                         md.append(f"![depth maps, {s}](figures/{p.name})\n")
                         md.append(f"*Reference keyframe inverse-depth maps of {s} at a few frames, per feature "
                                   "(paper Figure 4; the keyframes may differ between features; magenta = "
-                                  "negative inverse depth).*\n")  # fmt: skip
+                                  "negative inverse depth"
+                                  + ("; per feature the run of the seed with the median RPE rotation error"
+                                     if seeded else "") + ").*\n")  # fmt: skip
 
     write_csv(root / "tables" / "rankings.csv", all_rank_rows, RANKING_COLUMNS)
-    write_csv(
-        root / "tables" / "ranks_per_sequence.csv",
-        all_seq_rank_rows,
-        ("dataset", "sequence", "feature") + tuple(f"{c.key}_rank" for c in CRITERIA),
-    )
+    write_csv(root / "tables" / "ranks_per_sequence.csv", all_seq_rank_rows, RANKS_PER_SEQUENCE_COLUMNS)
     write_csv(root / "tables" / "averages.csv", all_avg_rows, AVERAGE_COLUMNS)
     write_csv(root / "tables" / "timings.csv", all_time_rows, TIMING_COLUMNS)
 
@@ -676,28 +921,34 @@ def write_report(
     lost = [r for r in records if r.status == "lost"]
     if failed or lost:
         md.append("## Failures and tracking losses\n")
+
+        def who(r: RunRecord) -> str:
+            return f"{r.sequence} / {r.feature}" + (f" / seed {r.seed}" if seeded else "")
+
         for r in lost:
             m = r.metrics or {}
             md.append(
-                f"- {r.sequence} / {r.feature}: tracking lost at frame {m.get('lost_at')} "
+                f"- {who(r)}: tracking lost at frame {m.get('lost_at')} "
                 f"({m.get('lost_reason') or 'no reason given'}) after {m.get('tracked_frames')} tracked frames."
             )
         for r in failed:
             e = r.error or {}
             reached = e.get("tracked_frames")
-            md.append(f"- {r.sequence} / {r.feature}: **failed** — {e.get('type', 'error')}: "
+            md.append(f"- {who(r)}: **failed** — {e.get('type', 'error')}: "
                       f"{str(e.get('message', '')).splitlines()[0] if e.get('message') else ''}"
                       + (f" (after {reached} tracked frames)" if reached else "")
-                      + f"; traceback in `runs/{r.sequence}/{r.path.name}/error.json`.")  # fmt: skip
+                      + f"; traceback in `runs/{r.key}/error.json`.")  # fmt: skip
         md.append("")
     if problems:
         md.append("## Problems while writing this report\n")
         md.extend(f"- {p}" for p in problems)
         md.append("")
     md.append("## Files\n")
-    md.append("`results.csv` (one row per run), `tables/rankings.csv`, `tables/ranks_per_sequence.csv`, "
-              "`tables/averages.csv`, `tables/timings.csv`; each run's outputs in `runs/<sequence>/<feature>/`. "
-              "Rebuild this report with `dmtrack report " + str(root) + "`.\n")  # fmt: skip
+    md.append("`results.csv` (one row per run), `tables/cells.csv` (one row per sequence and feature: median, "
+              "min, max over the seeds), `tables/rankings.csv`, `tables/ranks_per_sequence.csv`, "
+              "`tables/averages.csv`, `tables/timings.csv`; each run's outputs in "
+              + ("`runs/<sequence>/<feature>/seed-<S>/`. " if seeded else "`runs/<sequence>/<feature>/`. ")
+              + "Rebuild this report with `dmtrack report " + str(root) + "`.\n")  # fmt: skip
     out = root / "report.md"
     _atomic_write(out, "\n".join(md).rstrip() + "\n")
     return out

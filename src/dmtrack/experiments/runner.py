@@ -16,19 +16,33 @@ Layout of the output folder ``DIR``::
         error.json                      only for a crashed run: exception, traceback, frames reached
     DIR/report.md, DIR/results.csv, DIR/tables/*.csv, DIR/figures/*.png   (dmtrack.evaluation.report)
 
+Several seeds
+-------------
+With ``seeds`` (``dmtrack bench --seeds 0,1,2``) every (sequence, feature) *cell* is run once per seed of the
+random depth initialisation, each run in ``DIR/runs/<sequence>/<feature>/seed-<S>/`` (the same files as
+above); the seeds are just more tasks of the grid, run in parallel like any other.  With exactly one seed
+(``seeds=[S]`` or ``seed=S``) the run stays in ``DIR/runs/<sequence>/<feature>/``, the layout of
+single-seed benches, so their folders resume as before.  A feature folder may hold a single-seed run and
+``seed-<S>/`` runs at the same time (a folder benched both ways); replacing the single-seed run keeps the
+``seed-<S>/`` folders inside it, and the report uses, for such a cell, the runs of the last bench's grid.
+The report gives per cell the median and the min–max over the seeds (:mod:`dmtrack.evaluation.report`).
+
 Resuming
 --------
 A run is *done* when its folder holds a ``metrics.json`` and a ``spec.json`` equal to the spec the grid
 would run now — sequence (absolute path or ``synthetic:…`` string), format, intrinsics, feature, start,
 max_frames, seed, r_l, the whole odometry configuration after ``--set`` overrides, whether depth images and
-the point cloud are written, and the dmtrack version.  Done runs are skipped; anything else (no folder, a
+the point cloud are written, and the dmtrack version.  The seed compares as the seed the run uses: no seed
+(the configuration's ``seed``, 0 by default) equals that seed given explicitly.  Each seed's run is its own
+task, so a killed multi-seed bench resumes per seed.  Done runs are skipped; anything else (no folder, a
 folder without ``metrics.json``, a different spec) is (re)run.  A crashed run (``error.json``, no
 ``metrics.json``) is run again unless ``skip_failed``.  A tracking loss is not a crash: the run finishes
 with ``lost_at`` in ``metrics.json``.
 
 Atomic results: a run writes into a hidden temporary folder next to its final one
-(``runs/<sequence>/.<feature>.tmp-<host>-<pid>-<random>``) and is moved into place with ``os.replace`` only
-when complete (the old folder, if any, is first renamed away and then deleted).  A killed bench therefore
+(``runs/<sequence>/.<feature>.tmp-<host>-<pid>-<random>``; ``.seed-<S>.tmp-…`` in the feature folder) and
+is moved into place with ``os.replace`` only when complete (the old folder, if any, is first renamed away
+and then deleted).  A killed bench therefore
 never leaves a half-written ``metrics.json``; its leftover temporary folders are deleted by the next bench
 on the same ``DIR`` — so two benches must not write into the same ``DIR`` at the same time.
 
@@ -105,6 +119,74 @@ def parse_r_l(value: Any) -> float:
     if not 0.0 < r <= 1.0:
         raise InputError(f"r_l must be in (0, 1], got {value!r}")
     return r
+
+
+_SEED_ITEM = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
+
+
+def parse_seeds(text: str | int | Iterable[int]) -> list[int]:
+    """Seeds from ``"0,1,2"``, ``"0-2"``, ``"0-2,5"`` (a comma list of seeds and inclusive ranges), an int or
+    a list of ints, in the given order; seeds are integers ≥ 0 and each may appear once.
+
+    >>> parse_seeds("0-2,5")
+    [0, 1, 2, 5]
+    """
+    if isinstance(text, bool):
+        raise InputError(f"seeds: not an integer: {text!r}")
+    if isinstance(text, int):
+        items: list[int] = [text]
+    elif isinstance(text, str):
+        items = []
+        if not text.strip():
+            raise InputError("seeds: empty list (expected e.g. 0,1,2 or 0-2 or 0-2,5)")
+        for part in text.split(","):
+            m = _SEED_ITEM.match(part)
+            if not m:
+                raise InputError(f"seeds: cannot read {part.strip()!r} in {text!r} (expected e.g. 0,1,2 or 0-2 or "
+                                 "0-2,5; seeds are integers ≥ 0)")  # fmt: skip
+            lo = int(m.group(1))
+            hi = lo if m.group(2) is None else int(m.group(2))
+            if hi < lo:
+                raise InputError(f"seeds: empty range {part.strip()!r} in {text!r} (write LOW-HIGH, LOW ≤ HIGH)")
+            items += range(lo, hi + 1)
+    else:
+        items = []
+        for v in text:
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise InputError(f"seeds: not an integer: {v!r}")
+            items.append(int(v))
+        if not items:
+            raise InputError("seeds: empty list")
+    for v in items:
+        if v < 0:
+            raise InputError(f"seeds must be ≥ 0, got {v}")
+    dup = sorted({v for v in items if items.count(v) > 1})
+    if dup:
+        raise InputError(f"seeds: {', '.join(map(str, dup))} listed twice in {text!r}")
+    return items
+
+
+def format_seeds(seeds: Iterable[int]) -> str:
+    """The inverse of :func:`parse_seeds` for sorted output: ``[0, 1, 2, 5]`` → ``"0-2,5"``."""
+    xs = sorted(set(int(s) for s in seeds))
+    parts: list[str] = []
+    i = 0
+    while i < len(xs):
+        j = i
+        while j + 1 < len(xs) and xs[j + 1] == xs[j] + 1:
+            j += 1
+        parts.append(str(xs[i]) if j == i else f"{xs[i]}-{xs[j]}" if j > i + 1 else f"{xs[i]},{xs[j]}")
+        i = j + 1
+    return ",".join(parts)
+
+
+def seed_dir_name(seed: int) -> str:
+    """Folder of one seed's run inside a feature folder with several seeds: ``seed-<S>``."""
+    return f"seed-{int(seed)}"
+
+
+#: A seed's run folder inside a feature folder (see :func:`seed_dir_name`).
+SEED_DIR = re.compile(r"^seed-(\d+)$")
 
 
 def _intrinsics_str(value: Any) -> str | None:
@@ -326,11 +408,13 @@ class RunTask:
     dataset: str
     threads: int | None = 1
     unit: str = "m"
+    seed_dir: str | None = None
 
     @property
     def key(self) -> str:
-        """``"<sequence>/<feature>"``."""
-        return f"{self.sequence_name}/{self.feature_dir}"
+        """``"<sequence>/<feature>"``, or ``"<sequence>/<feature>/seed-<S>"`` in a bench with several seeds."""
+        base = f"{self.sequence_name}/{self.feature_dir}"
+        return base if self.seed_dir is None else f"{base}/{self.seed_dir}"
 
     @property
     def feature_dir(self) -> str:
@@ -338,8 +422,9 @@ class RunTask:
 
     @property
     def run_dir(self) -> Path:
-        """``DIR/runs/<sequence>/<feature>``."""
-        return Path(self.bench_dir) / "runs" / self.sequence_name / self.feature_dir
+        """``DIR/runs/<sequence>/<feature>`` (one seed) or ``DIR/runs/<sequence>/<feature>/seed-<S>``."""
+        d = Path(self.bench_dir) / "runs" / self.sequence_name / self.feature_dir
+        return d if self.seed_dir is None else d / self.seed_dir
 
 
 def _normalise(obj: Any) -> Any:
@@ -401,15 +486,20 @@ def plan_grid(
     depth_images: bool = True,
     pointcloud: bool = True,
     threads_per_job: int = 1,
+    seeds: Sequence[int] | str | None = None,
 ) -> tuple[list[RunTask], list[ResolvedSequence]]:
-    """The tasks of the grid ``sequences × features`` (sequence-major order) and the resolved sequences.
+    """The tasks of the grid ``sequences × features`` (× ``seeds``; sequence-major order) and the resolved
+    sequences.
 
     ``config`` is a :class:`~dmtrack.odometry.config.VOConfig` (default: LSD-SLAM's) to which
     ``overrides`` (``"section.key=value"``) are applied; both are validated here.  Sequence names that
-    collide get ``-2``, ``-3``… appended.
+    collide get ``-2``, ``-3``… appended.  ``seeds`` (a list or ``"0-2,5"``) runs every cell once per seed,
+    each into ``<feature>/seed-<S>/`` when there are several (``seed`` and ``seeds`` exclude each other; one
+    seed is the same as ``seed``).
     """
     from dmtrack.odometry.config import VOConfig
 
+    seed_list = _seed_list(seed, seeds)
     if not features:
         raise InputError("no features given")
     if not sequences:
@@ -434,13 +524,24 @@ def plan_grid(
     tasks = []
     for rs in resolved:
         for f in features:
-            spec = make_spec(
-                rs, f, start=start, max_frames=max_frames, seed=seed, r_l=r_l, format=format,
-                intrinsics=intrinsics, config=cfg_dict, overrides=overrides, depth_images=depth_images,
-                pointcloud=pointcloud,
-            )  # fmt: skip
-            tasks.append(RunTask(bench_dir, rs.name, f, spec, rs.dataset, threads_per_job, rs.unit))
+            for s in seed_list:
+                spec = make_spec(
+                    rs, f, start=start, max_frames=max_frames, seed=s, r_l=r_l, format=format,
+                    intrinsics=intrinsics, config=cfg_dict, overrides=overrides, depth_images=depth_images,
+                    pointcloud=pointcloud,
+                )  # fmt: skip
+                sub = seed_dir_name(s) if len(seed_list) > 1 and s is not None else None
+                tasks.append(RunTask(bench_dir, rs.name, f, spec, rs.dataset, threads_per_job, rs.unit, sub))
     return tasks, resolved
+
+
+def _seed_list(seed: int | None, seeds: Sequence[int] | str | None) -> list[int | None]:
+    """The seeds of every cell: ``[seed]`` (``None``: the configuration's) or the parsed ``seeds``."""
+    if seeds is None:
+        return [seed]
+    if seed is not None:
+        raise InputError("give either seed (one seed) or seeds (several), not both")
+    return list(parse_seeds(seeds))
 
 
 # ============================================================================================ file helpers
@@ -462,7 +563,7 @@ def run_state(task: RunTask) -> str:
     """``"done"`` (metrics.json and an equal spec.json), ``"failed"`` (error.json and an equal spec) or
     ``"todo"``."""
     d = task.run_dir
-    if read_json(d / "spec.json") != task.spec:
+    if not same_spec(read_json(d / "spec.json"), task.spec):
         return "todo"
     if isinstance(read_json(d / "metrics.json"), dict):
         return "done"
@@ -471,26 +572,64 @@ def run_state(task: RunTask) -> str:
     return "todo"
 
 
+def effective_seed(spec: Any) -> Any:
+    """The seed a run with this spec uses: its ``seed``, else its configuration's (``None`` if unknown)."""
+    if not isinstance(spec, dict):
+        return None
+    if spec.get("seed") is not None:
+        return spec["seed"]
+    cfg = spec.get("config")
+    return cfg.get("seed", 0) if isinstance(cfg, dict) else None
+
+
+def same_spec(stored: Any, wanted: dict[str, Any]) -> bool:
+    """Whether a stored ``spec.json`` defines the same run as ``wanted``: equal, except that the seed compares
+    as :func:`effective_seed` (no seed with a configuration seed 0 is the same run as seed 0)."""
+    if not isinstance(stored, dict):
+        return False
+    if stored == wanted:
+        return True
+    a, b = dict(stored), dict(wanted)
+    a["seed"], b["seed"] = effective_seed(stored), effective_seed(wanted)
+    return a == b
+
+
 def _temp_dir(task: RunTask) -> Path:
     host = safe_name(socket.gethostname())[:40]
-    tmp = task.run_dir.with_name(f".{task.feature_dir}.tmp-{host}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    final = task.run_dir
+    tmp = final.with_name(f".{final.name}.tmp-{host}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     tmp.mkdir(parents=True)
     return tmp
 
 
 def _commit(tmp: Path, final: Path) -> None:
-    """Move the finished temporary folder ``tmp`` to ``final`` (replacing it) with ``os.replace``."""
+    """Move the finished temporary folder ``tmp`` to ``final`` (replacing it) with ``os.replace``.
+
+    The ``seed-<S>/`` runs inside a replaced feature folder (a folder benched with one seed and with several)
+    are moved into the new one, each with ``os.replace``: they are kept, not deleted with the old run.
+    """
     trash = None
     if final.exists():
         trash = final.with_name(f".{final.name}.trash-{uuid.uuid4().hex[:8]}")
         os.replace(final, trash)
     os.replace(tmp, final)
     if trash is not None:
+        for child in sorted(trash.iterdir()):
+            if child.is_dir() and SEED_DIR.match(child.name) and not (final / child.name).exists():
+                os.replace(child, final / child.name)
         shutil.rmtree(trash, ignore_errors=True)
 
 
+_STALE_SEED_DIR = re.compile(r"^\.seed-\d+\.(?:tmp|trash)-")
+
+
+def _is_stale(p: Path) -> bool:
+    return p.name.startswith(".") and (".tmp-" in p.name or ".trash-" in p.name)
+
+
 def clean_stale(bench_dir: str | Path) -> list[Path]:
-    """Delete the temporary / trash folders a killed bench left in ``DIR/runs/*/``; returns them."""
+    """Delete the temporary / trash folders a killed bench left in ``DIR/runs/*/`` and, for the runs of
+    several seeds, in ``DIR/runs/*/*/``; returns them."""
     removed = []
     runs = Path(bench_dir) / "runs"
     if not runs.is_dir():
@@ -499,9 +638,14 @@ def clean_stale(bench_dir: str | Path) -> list[Path]:
         if not seq_dir.is_dir():
             continue
         for d in seq_dir.iterdir():
-            if d.name.startswith(".") and (".tmp-" in d.name or ".trash-" in d.name):
+            if _is_stale(d):
                 shutil.rmtree(d, ignore_errors=True) if d.is_dir() else d.unlink(missing_ok=True)
                 removed.append(d)
+            elif d.is_dir() and not d.name.startswith("."):
+                for sub in d.iterdir():
+                    if sub.is_dir() and _STALE_SEED_DIR.match(sub.name):
+                        shutil.rmtree(sub, ignore_errors=True)
+                        removed.append(sub)
     return removed
 
 
@@ -916,7 +1060,8 @@ class BenchResult:
     out_dir : the bench folder.
     tasks : every run of the grid.
     sequences : the resolved sequences.
-    executed : keys (``"<sequence>/<feature>"``) of the runs run now.
+    executed : keys (``"<sequence>/<feature>"``, ``"<sequence>/<feature>/seed-<S>"`` with several seeds) of
+        the runs run now.
     skipped : keys of the runs found done (or failed, with ``skip_failed``) and not run again.
     outcomes : per executed key, the outcome dict of :func:`execute_task`.
     report : path of ``report.md`` (``None`` if not written).
@@ -986,6 +1131,7 @@ def run_bench(
     start: int = 0,
     max_frames: int | None = None,
     seed: int | None = None,
+    seeds: Sequence[int] | str | None = None,
     r_l: float | None = None,
     format: str | None = None,
     intrinsics: str | None = None,
@@ -1012,6 +1158,8 @@ def run_bench(
         (``out_dir`` must then be on a filesystem every worker sees at the same path).
     start, max_frames, seed, r_l, format, intrinsics : run options (a :class:`SequenceSpec` overrides
         ``start``, ``max_frames``, ``r_l``, ``format`` and ``intrinsics`` for its sequence).
+    seeds : run every cell once per seed (a list, or ``"0,1,2"`` / ``"0-2,5"``), into
+        ``<feature>/seed-<S>/`` when there are several; not together with ``seed``.
     config, overrides : odometry configuration (a VOConfig; default LSD-SLAM's) and ``key=value`` overrides.
     depth_images, pointcloud : write ``depth/*.png`` and ``pointcloud.ply`` per run.
     threads_per_job : numba / OpenCV / BLAS threads per worker.
@@ -1029,14 +1177,16 @@ def run_bench(
     if threads_per_job < 1:
         raise InputError(f"threads per job must be ≥ 1, got {threads_per_job}")
     out = Path(out_dir).expanduser().resolve()
+    seed_list = _seed_list(seed, seeds)
     tasks, resolved = plan_grid(
         sequences, features, out, start=start, max_frames=max_frames, seed=seed, r_l=r_l, format=format,
         intrinsics=intrinsics, config=config, overrides=overrides, depth_images=depth_images,
-        pointcloud=pointcloud, threads_per_job=threads_per_job,
+        pointcloud=pointcloud, threads_per_job=threads_per_job, seeds=seeds,
     )  # fmt: skip
     (out / "runs").mkdir(parents=True, exist_ok=True)
     clean_stale(out)
-    options = {"start": start, "max_frames": max_frames, "seed": seed, "r_l": r_l, "format": format,
+    options = {"start": start, "max_frames": max_frames, "seed": seed,
+               "seeds": None if seeds is None else list(seed_list), "r_l": r_l, "format": format,
                "intrinsics": intrinsics, "overrides": list(overrides), "depth_images": depth_images,
                "pointcloud": pointcloud, "jobs": jobs, "scheduler": scheduler,
                "threads_per_job": threads_per_job}  # fmt: skip

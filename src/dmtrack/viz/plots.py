@@ -38,32 +38,54 @@ def _save(fig: Any, path: str | Path) -> Path:
 # ------------------------------------------------------------------------------------- Figure 1: RPE(L)
 @dataclass(frozen=True)
 class RpeCurve:
-    """Per-length RPE of one run.
+    """Per-length RPE of one run, or the median of several seeds' runs with their min–max.
 
     Attributes
     ----------
     label : legend text (the paper: ``"Gray [1234]"`` with the tracked frames in brackets).
     lengths : (K,) path lengths L_k, ground-truth length unit.
     rot, trans : (K,) mean rotation / translation-angle error at each length, degrees per length unit
-        (NaN where a length has no pair).
+        (NaN where a length has no pair); with several seeds, the median over them.
+    rot_lo, rot_hi, trans_lo, trans_hi : (K,) minimum and maximum over the seeds (drawn as error bars), or
+        ``None`` for one run.
     """
 
     label: str
     lengths: np.ndarray
     rot: np.ndarray
     trans: np.ndarray
+    rot_lo: np.ndarray | None = None
+    rot_hi: np.ndarray | None = None
+    trans_lo: np.ndarray | None = None
+    trans_hi: np.ndarray | None = None
+
+
+def _yerr(y: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None, ok: np.ndarray) -> np.ndarray | None:
+    """Asymmetric error bars ``(2, n)`` from bounds (missing bounds: no bar), never negative."""
+    if lo is None or hi is None:
+        return None
+    lo = np.asarray(lo, dtype=float)[ok]
+    hi = np.asarray(hi, dtype=float)[ok]
+    err = np.stack([y - lo, hi - y])
+    return np.clip(np.nan_to_num(err, nan=0.0), 0.0, None)
 
 
 def save_rpe_vs_length(path: str | Path, curves: Sequence[RpeCurve], title: str, unit: str = "m") -> Path:
-    """Figure 1: RPE rotation and translation-angle errors against the path length, one line per run."""
+    """Figure 1: RPE rotation and translation-angle errors against the path length, one line per run (or per
+    feature: the median over seeds, with min–max error bars)."""
     fig = _figure(10.0, 3.8)
     ax_rot, ax_trans = fig.subplots(1, 2)
-    for c in curves:
+    for i, c in enumerate(curves):
         x = np.asarray(c.lengths, dtype=float)
-        for ax, y in ((ax_rot, c.rot), (ax_trans, c.trans)):
+        for ax, y, lo, hi in ((ax_rot, c.rot, c.rot_lo, c.rot_hi), (ax_trans, c.trans, c.trans_lo, c.trans_hi)):
             y = np.asarray(y, dtype=float)
             ok = np.isfinite(x) & np.isfinite(y)
-            ax.plot(x[ok], y[ok], marker="o", markersize=3, linewidth=1.3, label=c.label)
+            yerr = _yerr(y[ok], lo, hi, ok)
+            if yerr is None:
+                ax.plot(x[ok], y[ok], marker="o", markersize=3, linewidth=1.3, label=c.label, color=f"C{i % 10}")
+            else:
+                ax.errorbar(x[ok], y[ok], yerr=yerr, marker="o", markersize=3, linewidth=1.3, capsize=3,
+                            label=c.label, color=f"C{i % 10}")  # fmt: skip
     ax_rot.set_title("RPE rotation error")
     ax_trans.set_title("RPE translation angle error")
     for ax in (ax_rot, ax_trans):
@@ -79,19 +101,32 @@ def save_rpe_vs_length(path: str | Path, curves: Sequence[RpeCurve], title: str,
 # ---------------------------------------------------------------------------- Figure 5: accuracy vs time
 @dataclass(frozen=True)
 class SpeedAccuracy:
-    """One feature's point of Figure 5: mean total time per frame (ms) and mean RPE errors."""
+    """One feature's point of Figure 5: mean total time per frame (ms) and mean RPE errors.
+
+    ``rot_range``, ``trans_range``, ``ms_range``: ``(low, high)`` drawn as error bars (several seeds: the
+    minima and maxima over the seeds averaged like the point), or ``None``.
+    """
 
     label: str
     total_ms: float
     rot: float | None
     trans: float | None
+    rot_range: tuple[float, float] | None = None
+    trans_range: tuple[float, float] | None = None
+    ms_range: tuple[float, float] | None = None
+
+
+def _bar(v: float, rng: tuple[float, float] | None) -> Any:
+    if rng is None:
+        return None
+    return [[max(0.0, v - rng[0])], [max(0.0, rng[1] - v)]]
 
 
 def save_accuracy_vs_time(
     path: str | Path, points: Sequence[SpeedAccuracy], title: str, unit: str = "m", note: str = ""
 ) -> Path:
     """Figure 5: average RPE errors against the average total processing time per frame, one point per
-    feature (log time axis)."""
+    feature (log time axis; with error bars where the points give ranges)."""
     fig = _figure(10.0, 3.8)
     axes = fig.subplots(1, 2)
     for ax, attr, name in ((axes[0], "rot", "rotation"), (axes[1], "trans", "translation angle")):
@@ -100,6 +135,10 @@ def save_accuracy_vs_time(
             if y is None or not np.isfinite(y) or not p.total_ms or p.total_ms <= 0:
                 continue
             ax.scatter([p.total_ms], [y], color=f"C{i % 10}", s=30, zorder=3)
+            yerr, xerr = _bar(y, getattr(p, f"{attr}_range")), _bar(p.total_ms, p.ms_range)
+            if yerr is not None or xerr is not None:
+                ax.errorbar([p.total_ms], [y], yerr=yerr, xerr=xerr, fmt="none", ecolor=f"C{i % 10}", capsize=3,
+                            linewidth=1.0, zorder=2)  # fmt: skip
             ax.annotate(p.label, (p.total_ms, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
         ax.set_xscale("log")
         ax.set_xlabel("total time per frame [ms]")

@@ -11,6 +11,7 @@ files of ``dmtrack run`` (``trajectory.txt``, ``keyframes.txt``, ``pointcloud.pl
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -115,6 +116,52 @@ def track(
     InputError
         Bad sequence, missing intrinsics, bad arguments.
     """
+    config = config or VOConfig()
+    if seed is not None:
+        config = config.with_overrides(f"seed={int(seed)}")
+    return track_many(
+        sequence,
+        feature,
+        [config],
+        start=start,
+        max_frames=max_frames,
+        sinks=[sink],
+        format=format,
+        intrinsics=intrinsics,
+        r_l=r_l,
+        progress=progress,
+    )[0]
+
+
+def track_many(
+    sequence: str | Path | Sequence,
+    feature: Any,
+    configs: list[VOConfig],
+    *,
+    start: int = 0,
+    max_frames: int | None = None,
+    sinks: list[OutputSink | None] | None = None,
+    format: str | None = None,
+    intrinsics: str | None = None,
+    r_l: float | None = None,
+    progress: bool | None = False,
+) -> list[RunResult]:
+    """Track ``sequence`` with one feature and several odometry configurations in lockstep.
+
+    Every frame is read and its feature computed once, then given to one :class:`VisualOdometry` per
+    configuration (e.g. seeds 0, 1, 2, or channel rules), in order. Each result is identical to that of
+    :func:`track` with the same configuration (the odometries share no state); reading and feature times are
+    shared and reported in full by each result. Frames are read until every odometry has stopped.
+
+    ``configs`` give the seeds (``config.seed``); ``energy_channels`` and ``info_channels`` left ``None`` are
+    filled in with the feature's measured values. ``sinks`` (optional) pairs one sink with each configuration.
+    """
+    if not configs:
+        raise InputError("track_many needs at least one configuration")
+    if sinks is None:
+        sinks = [None] * len(configs)
+    if len(sinks) != len(configs):
+        raise InputError(f"{len(sinks)} sinks for {len(configs)} configurations")
     seq = _open(sequence, format, intrinsics)
     if seq.camera is None:
         raise InputError(
@@ -126,19 +173,17 @@ def track(
     if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames must be ≥ 1, got {max_frames}")
     stop = n if max_frames is None else min(n, start + max_frames)
-    config = config or VOConfig()
-    if seed is not None:
-        config = config.with_overrides(f"seed={int(seed)}")
     feat = _feature(feature)
-    if getattr(feat, "affine_brightness", False) and not config.tracker.affine:
-        config = config.with_overrides("tracker.affine=true")
+    configs = [_for_feature(c, feat) for c in configs]
+    n_levels = configs[0].pyramid_levels
+    if any(c.pyramid_levels != n_levels for c in configs):
+        raise InputError("track_many: every configuration must use the same pyramid_levels")
 
     camera, box = seq.camera.crop_to_multiple(16)
-    vo = VisualOdometry(camera, config, sink=sink)
-    n_levels = config.pyramid_levels
+    vos = [VisualOdometry(camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
     recompute = getattr(feat, "pyramid", "downsample") == "recompute"
 
-    init_depth = config.init == "groundtruth"
+    init_depth = any(c.init == "groundtruth" for c in configs)
     if init_depth:
         if not getattr(seq, "has_depth", False):
             raise InputError(f"init='groundtruth' needs depth images, and sequence {seq.name!r} has none")
@@ -171,6 +216,7 @@ def track(
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
     pending: deque[Future] = deque()
     nxt = start
+    results: list[VOResult] = []
     try:
         for i in range(start, stop):
             while nxt < stop and len(pending) <= PREFETCH:
@@ -179,51 +225,70 @@ def track(
             timestamp, image, fmap, dt_io, dt_feat, depth = pending.popleft().result()
             t_io += dt_io
             t_feat += dt_feat
-            vo.process(i, timestamp, image, fmap, depth)
+            for vo in vos:
+                if not vo.stopped:
+                    vo.process(i, timestamp, image, fmap, depth)
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix_str(f"kf {vo.n_keyframes}", refresh=False)
-            if vo.stopped:
+                bar.set_postfix_str(f"kf {vos[0].n_keyframes}", refresh=False)
+            if all(vo.stopped for vo in vos):
                 break
     finally:
         for fut in pending:
             fut.cancel()
         pool.shutdown(wait=True)
-        vo_result = vo.finish()  # closes the sink: finished results reach disk even on an error
+        for vo in vos:
+            results.append(vo.finish())  # closes the sink: finished results reach disk even on an error
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - t_start
 
-    processed = max(vo_result.total_frames, 1)
-    tm = vo_result.timings_ms
-    timings = {
-        "io": 1e3 * t_io / processed,
-        "feature": 1e3 * t_feat / processed,
-        "pyramid": tm.get("pyramid", 0.0),
-        "tracking": tm.get("tracking", 0.0),
-        "mapping": tm.get("mapping", 0.0),
-        "wall_s": wall,
-    }
-    traj = Trajectory(vo_result.timestamps, vo_result.poses)
-    kfs = Trajectory(
-        np.array([k.timestamp for k in vo_result.keyframes], dtype=np.float64),
-        np.array([k.T_wc for k in vo_result.keyframes], dtype=np.float64).reshape(-1, 4, 4),
-    )
-    result = RunResult(
-        trajectory=traj,
-        keyframes=kfs,
-        frame_indices=vo_result.indices,
-        total_frames=stop - start,
-        tracked_frames=vo_result.tracked_frames,
-        lost_at=vo_result.lost_at,
-        lost_reason=vo_result.lost[0][1] if vo_result.lost else None,
-        timings_ms=timings,
-        vo=vo_result,
-    )
     if r_l is None:
         r_l = R_L_BY_FORMAT.get(seq.format, DEFAULT_R_L)
-    result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
-    return result
+    out: list[RunResult] = []
+    for config, vo_result in zip(configs, results, strict=True):
+        processed = max(vo_result.total_frames, 1)
+        tm = vo_result.timings_ms
+        timings = {
+            "io": 1e3 * t_io / processed,
+            "feature": 1e3 * t_feat / processed,
+            "pyramid": tm.get("pyramid", 0.0),
+            "tracking": tm.get("tracking", 0.0),
+            "mapping": tm.get("mapping", 0.0),
+            "wall_s": wall,
+        }
+        traj = Trajectory(vo_result.timestamps, vo_result.poses)
+        kfs = Trajectory(
+            np.array([k.timestamp for k in vo_result.keyframes], dtype=np.float64),
+            np.array([k.T_wc for k in vo_result.keyframes], dtype=np.float64).reshape(-1, 4, 4),
+        )
+        result = RunResult(
+            trajectory=traj,
+            keyframes=kfs,
+            frame_indices=vo_result.indices,
+            total_frames=stop - start,
+            tracked_frames=vo_result.tracked_frames,
+            lost_at=vo_result.lost_at,
+            lost_reason=vo_result.lost[0][1] if vo_result.lost else None,
+            timings_ms=timings,
+            vo=vo_result,
+        )
+        result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
+        out.append(result)
+    return out
+
+
+def _for_feature(config: VOConfig, feat: Any) -> VOConfig:
+    """``config`` completed for ``feat``: Gray-A switches on affine brightness; ``energy_channels`` and
+    ``info_channels`` left None take the feature's measured values."""
+    if getattr(feat, "affine_brightness", False) and not config.tracker.affine:
+        config = config.with_overrides("tracker.affine=true")
+    for key in ("energy_channels", "info_channels"):
+        if getattr(config, key) is None:
+            value = getattr(feat, key, None)
+            if value is not None:
+                config = dataclasses.replace(config, **{key: float(value)})
+    return config
 
 
 def _progress(total: int, name: str, feature: str, enabled: bool | None):  # noqa: ANN202
@@ -284,6 +349,9 @@ def metrics_dict(
         "channels": int(getattr(feature, "channels", 0)),
         "feature_scale": _finite(getattr(feature, "scale", None)),
         "seed": int(config.seed),
+        "channel_cost": config.channel_cost,
+        "energy_channels": _finite(config.energy_channels),
+        "info_channels": _finite(config.info_channels),
         "r_l": r_l,
         "dmtrack_version": __version__,
     }

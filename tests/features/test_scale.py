@@ -15,7 +15,9 @@ from dmtrack.features.scale import (
     calibrate_scale,
     calibrate_scale_detailed,
     channel_mean_gradient,
+    compute_channel_statistics,
     count_semi_dense,
+    measure_channel_statistics,
     solve_scale,
 )
 
@@ -176,3 +178,60 @@ def test_packaged_dsift_scale_is_reproduced(sample_dir: Path) -> None:
     entry = default_scales_table()["scales"]["dsift"]
     cal = calibrate_scale_detailed(get_feature("dsift", **entry["options"]), _table_images(sample_dir))
     assert cal.scale == pytest.approx(entry["scale"], abs=1e-4)
+
+
+# ------------------------------------------------------------------ channel statistics (docs/multichannel-cost.md)
+class _Copies(Feature):
+    """The grey image repeated ``n`` times (fully correlated channels)."""
+
+    needs_colour = True
+
+    def __init__(self, n: int, scale: float = 1.0) -> None:
+        super().__init__(scale)
+        self.channels = n
+        self.name = f"copies{n}"
+
+    def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        g = get_feature("gray", scale=1.0).compute(image)
+        return np.repeat(g, self.channels, axis=2) * np.float32(gain)
+
+
+def test_channel_statistics_of_grey_and_of_copies() -> None:
+    imgs = _images(2, 96, 128)
+    grey = measure_channel_statistics("gray", imgs)
+    assert grey.energy_channels == pytest.approx(1.0, rel=1e-12)
+    assert grey.info_channels == pytest.approx(1.0, rel=2e-3)  # the ridge only
+    assert grey.noise_var == pytest.approx(grey.grey_noise_var) and grey.noise_channels == pytest.approx(1.0)
+    # three copies: three times the gradient energy, the information of one grey image
+    three = measure_channel_statistics(_Copies(3), imgs)
+    assert three.energy_channels == pytest.approx(3.0, rel=1e-12)
+    assert three.info_channels == pytest.approx(1.0, rel=0.01)
+    assert three.noise_channels == pytest.approx(1.0, rel=1e-6)
+    # scaling the feature by s: N_E × s², κ ÷ s²
+    two = measure_channel_statistics(_Copies(3, scale=2.0), imgs)
+    assert two.energy_channels == pytest.approx(12.0, rel=1e-9)
+    assert two.info_channels == pytest.approx(three.info_channels / 4.0, rel=1e-6)
+
+
+def test_rgb_channels_carry_independent_noise() -> None:
+    """Independent noise per colour channel: κ = N σ_g²/σ_c² ≈ 3 · (0.299² + 0.587² + 0.114²) / scale² ≈ 1.5."""
+    rgb = measure_channel_statistics("rgb", _images(2, 96, 128))
+    assert rgb.noise_channels == pytest.approx(3.0, rel=0.02)
+    w2 = 0.299**2 + 0.587**2 + 0.114**2
+    assert rgb.info_channels == pytest.approx(3.0 * w2 / get_feature("rgb").scale ** 2, rel=0.05)
+
+
+def test_packaged_channel_statistics_and_feature_properties(sample_dir: Path) -> None:
+    table = default_scales_table()["scales"]
+    for name in ("rgb", "lab", "bitplanes", "dsift"):
+        f = get_feature(name)
+        assert f.energy_channels == table[name]["energy_channels"] and f.info_channels == table[name]["info_channels"]
+        assert 0 < f.info_channels <= f.channels and 0 < f.energy_channels
+    assert get_feature("gray").energy_channels == 1.0 and get_feature("gray").info_channels == 1.0
+    bp = get_feature("bitplanes", scale=2 * table["bitplanes"]["scale"])
+    assert bp.energy_channels == pytest.approx(4 * table["bitplanes"]["energy_channels"])
+    assert bp.info_channels == pytest.approx(table["bitplanes"]["info_channels"] / 4)
+    # reproduced from the repository's sample (the regeneration command in the table's note)
+    got = compute_channel_statistics(_table_images(sample_dir)[:20], ["bitplanes"])["bitplanes"]
+    assert got["energy_channels"] == table["bitplanes"]["energy_channels"]
+    assert got["info_channels"] == table["bitplanes"]["info_channels"]

@@ -96,10 +96,10 @@ def _candidates(kf, geo, prm, cscale):
     return out
 
 
-def _stereo_all(kf, fr, T_fk, cfg, cscale, fn=dk.line_stereo_numba, ranges=None):
+def _stereo_all(kf, fr, T_fk, cfg, cscale, fn=dk.line_stereo_numba, ranges=None, info=1.0):
     cam = kf.camera
     geo = dk.stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, T_fk, 0.0)
-    prm = dk.make_params(cfg)
+    prm = dk.make_params(cfg, info)
     lv = kf.levels[0]
     rows = []
     for x, y, ex, ey in _candidates(kf, geo, prm, cscale):
@@ -134,7 +134,7 @@ def test_line_stereo_recovers_plane_inverse_depth(seeds):
 
 
 def test_mean_reduction_over_identical_channels_equals_grey():
-    """With ssd_reduction="mean", three identical channels must behave exactly like one."""
+    """With the channel mean (cscale 1/N), three identical channels must behave exactly like one."""
     cam = _camera(128, 96)
     T_wc = _motion(6)
     kf1, _ = _frame(0, cam, np.eye(4), (1,))
@@ -143,7 +143,7 @@ def test_mean_reduction_over_identical_channels_equals_grey():
     fr3, _ = _frame(6, cam, T_wc, (1, 1, 1))
     T_fk = np.linalg.inv(T_wc)
     r1 = _stereo_all(kf1, fr1, T_fk, DepthConfig(), 1.0)
-    r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(ssd_reduction="mean"), 1.0 / 3.0)
+    r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0)
     assert r1.shape == r3.shape
     code1 = np.minimum(r1[:, 2], 0)
     code3 = np.minimum(r3[:, 2], 0)
@@ -161,6 +161,55 @@ def test_mean_reduction_over_identical_channels_equals_grey():
     assert both_s.sum() > 0.8 * (r1[:, 2] >= 0).sum()
     np.testing.assert_allclose(r3s[both_s, 2], 3.0 * r1[both_s, 2], rtol=1e-4)
     assert not np.allclose(r3s[both_s, 4], r1[both_s, 4], rtol=1e-3)
+
+
+def test_information_factor_counts_channels_as_independent_observations():
+    """Balanced rule: N identical channels with κ = N see the SSD of one channel and the information of N.
+
+    Three copies of a grey frame with the channel mean (cscale 1/3) and information factor 3 must give grey's
+    matches, with the photometric variance of grey at a third of the pixel noise (σ² / 3): the same stereo as
+    grey with camera_pixel_noise2 = 16/3 wherever the gradient gates agree. Numba and reference agree.
+    """
+    cam = _camera(128, 96)
+    T_wc = _motion(6)
+    kf1, _ = _frame(0, cam, np.eye(4), (1,))
+    fr1, _ = _frame(6, cam, T_wc, (1,))
+    kf3, _ = _frame(0, cam, np.eye(4), (1, 1, 1))
+    fr3, _ = _frame(6, cam, T_wc, (1, 1, 1))
+    T_fk = np.linalg.inv(T_wc)
+    r1 = _stereo_all(kf1, fr1, T_fk, DepthConfig(camera_pixel_noise2=16.0 / 3.0), 1.0)
+    r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, info=3.0)
+    r3_ref = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, fn=dk.line_stereo_reference, info=3.0)
+    np.testing.assert_allclose(r3_ref, r3, rtol=1e-6, atol=1e-9, equal_nan=True)
+    # the epipolar-gradient gate sees 3× the information: a superset of grey's candidates
+    index = {(int(x), int(y)): i for i, (x, y) in enumerate(r3[:, :2])}
+    assert len(r3) > len(r1) and all((int(x), int(y)) in index for x, y in r1[:, :2])
+    r3 = r3[[index[(int(x), int(y))] for x, y in r1[:, :2]]]
+    assert np.mean(np.minimum(r1[:, 2], 0) == np.minimum(r3[:, 2], 0)) > 0.995
+    both = (r1[:, 2] >= 0) & (r3[:, 2] >= 0)
+    np.testing.assert_allclose(r3[both, 3], r1[both, 3], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(r3[both, 4], r1[both, 4], rtol=1e-4)
+    # and it is not a no-op: with information factor 1 the variances are larger
+    r3m = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0)
+    index = {(int(x), int(y)): i for i, (x, y) in enumerate(r3m[:, :2])}
+    r3m = r3m[[index[(int(x), int(y))] for x, y in r1[:, :2]]]
+    both = both & (r3m[:, 2] >= 0)
+    assert np.all(r3m[both, 4] >= r1[both, 4]) and np.mean(r3m[both, 4] > 1.01 * r1[both, 4]) > 0.5
+
+
+def test_channel_rule_reduces_to_grey_for_one_channel():
+    from dmtrack.odometry.config import ChannelRule
+
+    for cost in ("balanced", "sum", "mean"):
+        for kappa, n_e in ((None, None), (0.5, 2.0), (19.0, 70.0)):
+            assert ChannelRule.of(cost, 1, kappa, n_e) == ChannelRule(1.0, 1.0, 1.0)
+    assert ChannelRule.of("sum", 8, 2.0, 1.5) == ChannelRule(1.0, 1.0, 8.0)
+    assert ChannelRule.of("mean", 8, 2.0, 1.5) == ChannelRule(1.0 / 8, 1.0, 8.0)
+    # balanced: SSD ÷ N_E; information Σg²/N_E·(κ N_E/N) = κ·mean(g²); good/bad constant N_E·40²
+    assert ChannelRule.of("balanced", 8, 2.0, 1.5) == ChannelRule(1.0 / 1.5, 2.0 * 1.5 / 8, 1.5)
+    assert ChannelRule.of("balanced", 8) == ChannelRule.of("mean", 8)  # unmeasured feature: the channel mean
+    with pytest.raises(InputError):
+        ChannelRule.of("max", 3)
 
 
 @pytest.mark.parametrize("seeds", [(1,), (4, 5), tuple(range(4, 30))], ids=["N=1", "N=2", "N=26"])
@@ -699,7 +748,7 @@ def test_input_errors():
     with pytest.raises(InputError):
         dm.update(kf, np.eye(4), np.ones((48, 64), bool))
     with pytest.raises(InputError):
-        DepthConfig(ssd_reduction="max")
+        DepthMap(channel_cost="max")
 
 
 # ================================================================================== LSD-SLAM oracle

@@ -102,10 +102,18 @@ def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(E[:3, 3])), float(ang)
 
 
-def track(pair: Pair, config: TrackerConfig | None = None, copies: int = 1, use_numba: bool = True, init=None):
+def track(
+    pair: Pair,
+    config: TrackerConfig | None = None,
+    copies: int = 1,
+    use_numba: bool = True,
+    init=None,
+    channel_cost: str = "balanced",
+):
     fk, ff = pair.frames(copies)
     ref = TrackingReference.from_keyframe(fk, *pair.depth_for(fk), use_numba=use_numba)
-    return Tracker(config or TrackerConfig(), use_numba=use_numba).track(ref, ff, np.eye(4) if init is None else init)
+    tracker = Tracker(config or TrackerConfig(), use_numba=use_numba, channel_cost=channel_cost)
+    return tracker.track(ref, ff, np.eye(4) if init is None else init)
 
 
 # ---------------------------------------------------------------------------------------------- kernels
@@ -303,14 +311,23 @@ def test_deterministic_and_parallel_identical(grey: Pair) -> None:
 def test_three_copies_of_grey_give_the_grey_pose(grey: Pair) -> None:
     # N = 3 runs the float32 vectorised channel loop (grey the float64 scalar one): equal up to float32 rounding
     one = track(grey)
-    three = track(grey, copies=3)
-    np.testing.assert_allclose(three.T_fk, one.T_fk, atol=1e-6)
-    assert three.iterations == one.iterations
-    assert three.last_residual == pytest.approx(3 * one.last_residual, rel=1e-6)
-    assert (three.good_count, three.bad_count) == (one.good_count, one.bad_count)
-    mean = track(grey, TrackerConfig(channel_weight="mean"), copies=3)
-    np.testing.assert_allclose(mean.T_fk, one.T_fk, atol=1e-6)
-    assert mean.last_residual == pytest.approx(one.last_residual, rel=1e-6)
+    # the default ("balanced") and "mean" average the error over channels: the per-channel residual of grey
+    for cost in ("balanced", "mean"):
+        three = track(grey, copies=3, channel_cost=cost)
+        np.testing.assert_allclose(three.T_fk, one.T_fk, atol=1e-6)
+        assert three.iterations == one.iterations
+        assert three.last_residual == pytest.approx(one.last_residual, rel=1e-6)
+        assert (three.good_count, three.bad_count) == (one.good_count, one.bad_count)
+    # the paper's sum triples it (same step: LM is invariant to a common factor of A and b)
+    summed = track(grey, copies=3, channel_cost="sum")
+    np.testing.assert_allclose(summed.T_fk, one.T_fk, atol=1e-6)
+    assert summed.last_residual == pytest.approx(3 * one.last_residual, rel=1e-6)
+    # for N = 1 every rule is the same computation, bit for bit
+    for cost in ("sum", "mean"):
+        other = track(grey, channel_cost=cost)
+        assert other.T_fk.tobytes() == one.T_fk.tobytes() and other.last_residual == one.last_residual
+    with pytest.raises(InputError):
+        Tracker(channel_cost="median")
 
 
 def test_genuinely_multichannel() -> None:

@@ -242,13 +242,23 @@ def test_config_defaults_overrides_and_yaml(tmp_path) -> None:
     assert (c.keyframe.kf_dist_weight, c.keyframe.kf_usage_weight, c.keyframe.threshold) == (3.0, 4.0, 0.14)
     assert (c.depth.min_use_grad, c.depth.max_var, c.depth.var_random_init_initial) == (5.0, 0.25, 0.125)
     assert VOConfig.from_dict(c.to_dict()) == c
-    o = c.with_overrides("tracker.huber_d=2", "tracker.levels=[3,2,1]", "depth.ssd_reduction=mean", "seed=7")
-    assert o.tracker.huber_d == 2.0 and o.tracker.levels == (3, 2, 1) and o.depth.ssd_reduction == "mean"
+    assert c.channel_cost == "balanced" and c.info_channels is None
+    o = c.with_overrides("tracker.huber_d=2", "tracker.levels=[3,2,1]", "channel_cost=sum", "seed=7")
+    assert o.tracker.huber_d == 2.0 and o.tracker.levels == (3, 2, 1) and o.channel_cost == "sum"
+    assert c.with_overrides("info_channels=19").info_channels == 19
     assert o.seed == 7 and c.tracker.huber_d == 3.0
     assert c.with_overrides("keyframe.loss_not_good_after=null").keyframe.loss_not_good_after is None
-    for bad in ("tracker.nope=1", "tracker.huber_d", "tracker.affine=3", "depth.ssd_reduction=median", "map_lag=-1"):
+    bads = ("tracker.nope=1", "tracker.huber_d", "tracker.affine=3", "channel_cost=median", "info_channels=0",
+            "info_channels=-2", "map_lag=-1")  # fmt: skip
+    for bad in bads:
         with pytest.raises(InputError):
             c.with_overrides(bad)
+    # the replaced per-component switches say what replaced them
+    for old in ("depth.ssd_reduction=mean", "tracker.channel_weight=mean"):
+        with pytest.raises(InputError, match="replaced by channel_cost"):
+            c.with_overrides(old)
+    with pytest.raises(InputError, match="replaced by channel_cost"):
+        VOConfig.from_dict({"depth": {"ssd_reduction": "mean"}})
     p = tmp_path / "vo.yaml"
     p.write_text("tracker:\n  affine: true\nkeyframe:\n  threshold: 0.2\n")
     y = VOConfig.from_yaml(p)

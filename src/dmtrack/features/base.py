@@ -225,6 +225,35 @@ class Feature(ABC):
                 maps.append(downsample_feature(maps[-1]))
         return maps
 
+    def _channel_stat(self, key: str, power: int) -> float | None:
+        if int(self.channels) == 1:
+            return 1.0
+        entry = default_scales_table()["scales"].get(self.name)
+        if entry and key in entry:
+            value, at_scale = float(entry[key]), float(entry["scale"])
+        else:
+            reg = _entries().get(self.name)
+            value = None if reg is None else getattr(reg, key)
+            if value is None or reg is None or reg.scale is None:
+                return None
+            value, at_scale = float(value), float(reg.scale)
+        return value * (float(self.scale) / at_scale) ** power
+
+    @property
+    def energy_channels(self) -> float | None:
+        """N_E, the gradient-energy channel count E[Σ_c|∇F_c|²]/E[|∇I|²] at this instance's scale (odometry
+        ``channel_cost="balanced"``; docs/multichannel-cost.md): 1 for a 1-channel feature, else the value
+        measured by :func:`dmtrack.features.scale.measure_channel_statistics` (``default_scales.json``, or the
+        registry entry), times (scale / measured scale)². ``None`` when not measured (the odometry uses N)."""
+        return self._channel_stat("energy_channels", 2)
+
+    @property
+    def info_channels(self) -> float | None:
+        """κ, the grey-equivalent number of independent channels at this instance's scale (odometry
+        ``channel_cost="balanced"``): 1 for a 1-channel feature, else the measured value (as
+        :attr:`energy_channels`) times (measured scale / scale)². ``None`` when not measured (the odometry uses 1)."""
+        return self._channel_stat("info_channels", -2)
+
     def info(self) -> dict[str, Any]:
         """Description of this instance (the same keys as :func:`list_features`)."""
         return {
@@ -344,6 +373,8 @@ class FeatureEntry:
     pyramid: PyramidPolicy = "downsample"
     scale: float | None = None
     description: str = ""
+    energy_channels: float | None = None
+    info_channels: float | None = None
 
     def resolve(self) -> Callable[..., Feature]:
         """The factory callable (imports its module if given as a string)."""
@@ -389,6 +420,8 @@ def register(
     scale: float | None = None,
     description: str = "",
     replace: bool = False,
+    energy_channels: float | None = None,
+    info_channels: float | None = None,
 ) -> FeatureEntry:
     """Register a feature under ``name``.
 
@@ -405,6 +438,9 @@ def register(
         As the :class:`Feature` attributes.
     scale : float, optional
         Default scale used when ``default_scales.json`` has no entry for ``name``.
+    energy_channels, info_channels : float, optional
+        N_E and κ measured at ``scale`` (:func:`dmtrack.features.scale.measure_channel_statistics`), used
+        when ``default_scales.json`` has none for ``name``.
     replace : bool
         Allow replacing an existing entry.
 
@@ -435,6 +471,8 @@ def register(
         pyramid=pyramid,
         scale=scale,
         description=description,
+        energy_channels=None if energy_channels is None else float(energy_channels),
+        info_channels=None if info_channels is None else float(info_channels),
     )
     with _LOCK:
         if name in _REGISTRY and not replace:

@@ -27,6 +27,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from dmtrack.errors import InputError
 from dmtrack.features.base import Feature, as_feature, default_scale, default_scales_table, iter_images
 from dmtrack.io.images import read_image
 
@@ -39,6 +40,9 @@ __all__ = [
     "default_scale",
     "default_scales_table",
     "compute_default_scales",
+    "ChannelStatistics",
+    "compute_channel_statistics",
+    "measure_channel_statistics",
 ]
 
 
@@ -288,14 +292,143 @@ def compute_default_scales(
     }
 
 
+@dataclass(frozen=True)
+class ChannelStatistics:
+    """Result of :func:`measure_channel_statistics`.
+
+    ``info_channels`` is κ, ``energy_channels`` N_E; ``noise_var`` the mean per-channel variance of the feature's
+    response to the image
+    noise (feature units, at the feature's scale), ``grey_noise_var`` that of the grey image, ``noise_channels``
+    the participation ratio (tr C)²/tr(C²) of the noise covariance C (N for independent equal noise, 1 for
+    fully correlated channels), ``n_samples`` the number of noise and gradient samples used.
+    """
+
+    info_channels: float
+    energy_channels: float
+    noise_var: float
+    grey_noise_var: float
+    noise_channels: float
+    n_samples: int
+
+
+def measure_channel_statistics(
+    feature: Feature | str,
+    images: Iterable[np.ndarray | str | Path],
+    sigma: float = 4.0,
+    seed: int = 0,
+    ridge: float = 1e-3,
+    stride: int = 7,
+    border: int = 8,
+) -> ChannelStatistics:
+    """N_E and κ: the channel counts of the odometry's ``channel_cost="balanced"`` (docs/multichannel-cost.md).
+
+    **N_E**, the gradient-energy channel count: E[Σ_c|∇F_c|²] / E[|∇I|²] over the interior pixels of
+    ``images``, with ∇ the halved central differences of the scaled feature F and of the grey image I. Dividing
+    the SSD-type sums by N_E makes a given misalignment δ cost what it costs in grey (its SSD is ≈ δ²·Σ_c|∇F_c|²).
+
+    **κ**, how many grey images' worth of independent information a feature's channel sum carries.
+
+    The odometry's information-type quantities (the photometric disparity variance 4σ²/Σ_c g_c² and the
+    epipolar-gradient gate; docs/multichannel-cost.md) sum squared feature gradients over channels as if every
+    channel carried independent noise of the grey level's variance. The proper information of a gradient
+    g ∈ ℝᴺ is gᵀC⁻¹g under the feature's noise covariance C; in grey units (noise variance σ_g² of the grey
+    image under the same image noise) that is σ_g²·gᵀC⁻¹g. κ is the factor that makes the channel mean of the
+    squared gradients carry that information on average::
+
+        κ = N · σ_g² · E[gᵀC⁻¹g] / E[Σ_c g_c²]
+
+    C is measured by pushing seeded Gaussian image noise (``sigma`` grey levels per colour channel, LSD-SLAM's
+    cameraPixelNoise = 4; the noisy image rounded to 8 bit) through the feature and taking the covariance of
+    the change over the interior pixels (``border`` pixels excluded) of ``images``; a ridge of
+    ``ridge``·tr(C)/N keeps the inverse finite. Gradients g are the halved central differences of the clean
+    feature (both directions, every ``stride``-th pixel). κ = 1 for grey by construction and for any feature
+    that is one grey image repeated; κ = N for N channels of independent noise and equal information each.
+    κ scales as 1/scale² (information is compared with gradients in feature units).
+    """
+    from dmtrack.features.base import get_feature
+
+    feat = as_feature(feature)
+    grey = get_feature("gray", scale=1.0)
+    rng = np.random.default_rng(seed)
+    n = int(feat.channels)
+    b = int(border)
+    cov = np.zeros((n, n))
+    mean = np.zeros(n)
+    count = 0
+    grey_d: list[np.ndarray] = []
+    g_parts: list[np.ndarray] = []
+    energy = grey_energy = 0.0
+    for img in iter_images(images):
+        noisy = np.clip(np.rint(img.astype(np.float64) + rng.normal(0.0, sigma, img.shape)), 0, 255).astype(np.uint8)
+        clean = feat.compute(img).astype(np.float64)
+        d = (feat.compute(noisy).astype(np.float64) - clean)[b:-b, b:-b].reshape(-1, n)
+        cov += d.T @ d
+        mean += d.sum(axis=0)
+        count += d.shape[0]
+        dg = grey.compute(noisy).astype(np.float64) - grey.compute(img).astype(np.float64)
+        grey_d.append(dg[b:-b, b:-b].ravel())
+        gx = 0.5 * (clean[b:-b, b + 1 : -b + 1] - clean[b:-b, b - 1 : -b - 1])
+        gy = 0.5 * (clean[b + 1 : -b + 1, b:-b] - clean[b - 1 : -b - 1, b:-b])
+        g_parts += [gx.reshape(-1, n)[::stride], gy.reshape(-1, n)[::stride]]
+        energy += float(np.mean(np.sum(gx * gx + gy * gy, axis=-1)))
+        gi = grey.compute(img).astype(np.float64)[..., 0]
+        gix = 0.5 * (gi[b:-b, b + 1 : -b + 1] - gi[b:-b, b - 1 : -b - 1])
+        giy = 0.5 * (gi[b + 1 : -b + 1, b:-b] - gi[b - 1 : -b - 1, b:-b])
+        grey_energy += float(np.mean(gix * gix + giy * giy))
+    if count == 0:
+        raise InputError("measure_channel_statistics needs at least one image")
+    mean /= count
+    C = cov / count - np.outer(mean, mean)
+    g = np.concatenate(g_parts)
+    sg2 = float(np.var(np.concatenate(grey_d)))
+    tr = float(np.trace(C))
+    Cr = C + ridge * tr / n * np.eye(n)
+    info = np.einsum("ij,ij->i", g @ np.linalg.inv(Cr), g)
+    kappa = n * sg2 * float(info.mean()) / float((g * g).sum(axis=1).mean())
+    return ChannelStatistics(
+        info_channels=kappa,
+        energy_channels=energy / grey_energy,
+        noise_var=tr / n,
+        grey_noise_var=sg2,
+        noise_channels=tr * tr / float(np.sum(C * C)),
+        n_samples=int(count),
+    )
+
+
+def compute_channel_statistics(
+    image_paths: Sequence[str | Path], names: Sequence[str] = ("rgb", "lab", "bitplanes", "dsift")
+) -> dict[str, dict[str, float]]:
+    """:func:`measure_channel_statistics` of several features (each at its default scale) on the same images:
+    ``{name: {"energy_channels", "info_channels", "noise_var", "grey_noise_var", "noise_channels"}}``."""
+    images = [read_image(p) for p in image_paths]
+    out: dict[str, dict[str, float]] = {}
+    for name in names:
+        cal = measure_channel_statistics(name, images)
+        out[name] = {
+            "energy_channels": round(cal.energy_channels, 3),
+            "info_channels": round(cal.info_channels, 3),
+            "noise_var": round(cal.noise_var, 3),
+            "grey_noise_var": round(cal.grey_noise_var, 3),
+            "noise_channels": round(cal.noise_channels, 2),
+        }
+    return out
+
+
 def _main() -> None:  # pragma: no cover - maintenance entry point (python -m dmtrack.features.scale FRAMES...)
     import sys
 
-    paths = sys.argv[1:]
-    if not paths:
-        print("usage: python -m dmtrack.features.scale IMAGE...", file=sys.stderr)
+    args = sys.argv[1:]
+    if args[:1] == ["--channels"]:
+        # python -m dmtrack.features.scale --channels rgb,lab,... FRAMES...: prints N_E and κ per feature
+        if len(args) < 3:
+            print("usage: python -m dmtrack.features.scale --channels NAMES IMAGE...", file=sys.stderr)
+            raise SystemExit(2)
+        print(json.dumps(compute_channel_statistics(args[2:], args[1].split(",")), indent=2))
+        return
+    if not args:
+        print("usage: python -m dmtrack.features.scale [--channels NAMES] IMAGE...", file=sys.stderr)
         raise SystemExit(2)
-    print(json.dumps(compute_default_scales(paths), indent=2))
+    print(json.dumps(compute_default_scales(args), indent=2))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -18,7 +18,10 @@ Conventions
   pyramid (so the un-halved LSD-SLAM differences are 2·gx, 2·gy).
 * Channel reduction of every SSD-type quantity (stereo cost, its cross terms, ``gradAlongLine``, the
   epipolar-gradient check and the propagation colour test): the sum over channels multiplied by ``cscale``
-  (1 for ``"sum"``, 1/N for ``"mean"``).
+  (``ChannelRule.residual``: 1 for ``channel_cost="sum"``, 1/N otherwise). Where a gradient sum acts as
+  information — the epipolar-gradient gate ``MIN_EPL_GRAD_SQUARED`` and the photometric variance
+  ``4σ²/gradAlongLine`` — it is further multiplied by ``prm[P_INFO]`` (``ChannelRule.info``: κ, the feature's
+  grey-equivalent channel count, for ``"balanced"``; 1 otherwise). See docs/multichannel-cost.md.
 * Scalars are computed in float64 and stored as float32 (note: inside numba, ``float()`` of a float32
   array element stays float32, hence the explicit ``np.float64`` conversions), except the regularisation,
   which runs in float32 like LSD-SLAM (its reference makes the same float32 decisions).
@@ -85,7 +88,8 @@ P_ALLOW_NEG = 25
 P_SUBPIXEL = 26
 P_PIX_NOISE2 = 27
 P_UPDATE_VAR = 28  # 0: smoothed (LSD-SLAM), 1: raw-search, 2: raw (see DepthConfig.update_variance)
-N_PARAMS = 29
+P_INFO = 29  # information factor of the channel rule (ChannelRule.info; 1 for N = 1, "sum" and "mean")
+N_PARAMS = 30
 
 # indices into the stereo geometry vector ``geo`` (other = keyframe, this = reference frame)
 G_FX, G_FY, G_CX, G_CY = 0, 1, 2, 3
@@ -140,10 +144,12 @@ N_PCOUNTS = 6
 PCOUNT_NAMES = ("attempts", "out_of_bounds", "dropped_not_good", "occluded", "created", "merged")
 
 
-def make_params(cfg) -> np.ndarray:
+def make_params(cfg, info: float = 1.0) -> np.ndarray:
     """Pack a :class:`~dmtrack.odometry.config.DepthConfig` into the float64 parameter vector ``prm``.
 
-    ``REG_DIST_VAR`` is ``reg_dist_var · depth_smoothing_factor²`` as in LSD-SLAM.
+    ``REG_DIST_VAR`` is ``reg_dist_var · depth_smoothing_factor²`` as in LSD-SLAM. ``info`` is the information
+    factor of the channel rule (:class:`~dmtrack.odometry.config.ChannelRule`): the epipolar-gradient gate and
+    the photometric variance use ``info · cscale · Σ_c`` of their gradient sums.
     """
     p = np.zeros(N_PARAMS, np.float64)
     p[P_MIN_GRAD] = cfg.min_use_grad
@@ -175,6 +181,7 @@ def make_params(cfg) -> np.ndarray:
     p[P_SUBPIXEL] = 1.0 if cfg.use_subpixel_stereo else 0.0
     p[P_PIX_NOISE2] = cfg.camera_pixel_noise2
     p[P_UPDATE_VAR] = UPDATE_VARIANCE_MODES.index(cfg.update_variance)
+    p[P_INFO] = float(info)
     return p
 
 
@@ -390,7 +397,7 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
     else:
         dot2, g2 = _epl_sums(kf_gx[y, x], kf_gy[y, x], epx, epy)
     epl_grad2 = cscale * dot2 / len2
-    if epl_grad2 < prm[P_MIN_EPL_GRAD2]:
+    if epl_grad2 * prm[P_INFO] < prm[P_MIN_EPL_GRAD2]:
         return False, 0.0, 0.0
     if epl_grad2 / (cscale * g2) < prm[P_MIN_EPL_ANGLE2]:
         return False, 0.0, 0.0
@@ -688,7 +695,7 @@ def _line_stereo(
     if idnew < 0 and prm[P_ALLOW_NEG] == 0.0:
         return -2.0, nan, nan, nan
 
-    photo = 4.0 * prm[P_PIX_NOISE2] / (gal + DIVISION_EPS)
+    photo = 4.0 * prm[P_PIX_NOISE2] / (gal * prm[P_INFO] + DIVISION_EPS)
     tau = geo[G_TRACK_FAC]
     iu = int(u)
     iv = int(v)
@@ -1312,7 +1319,7 @@ def epl_check_reference(
         return False, 0.0, 0.0
     g = 2.0 * np.stack([kf_gx[y, x].astype(np.float64), kf_gy[y, x].astype(np.float64)], axis=1)  # (N, 2)
     epl_grad2 = cscale * float(np.sum((g @ e) ** 2)) / len2
-    if epl_grad2 < prm[P_MIN_EPL_GRAD2]:
+    if epl_grad2 * prm[P_INFO] < prm[P_MIN_EPL_GRAD2]:
         return False, 0.0, 0.0
     if epl_grad2 / (cscale * float(np.sum(g * g))) < prm[P_MIN_EPL_ANGLE2]:
         return False, 0.0, 0.0
@@ -1488,7 +1495,7 @@ def line_stereo_reference(
     if idnew < 0 and prm[P_ALLOW_NEG] == 0.0:
         return (-2.0, *fail)
 
-    photo = 4.0 * prm[P_PIX_NOISE2] / (gal + DIVISION_EPS)
+    photo = 4.0 * prm[P_PIX_NOISE2] / (gal * prm[P_INFO] + DIVISION_EPS)
     g = np.stack([kf_gx[int(v), int(u)], kf_gy[int(v), int(u)]], axis=1).astype(np.float64)  # (N, 2)
     tau = geo[G_TRACK_FAC]
     geo_err = (

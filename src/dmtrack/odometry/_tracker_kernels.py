@@ -260,7 +260,7 @@ def _eval_block(
     noise2 = prm[P_NOISE2]
     huber_half = prm[P_HUBER_HALF]
     huber2 = huber_half * huber_half
-    good_den_c = nch * prm[P_GOOD_C]
+    good_den_c = prm[P_GOOD_C]
     good_g = prm[P_GOOD_G]
     aff_thr = prm[P_AFF_THR]
     r00 = T[0, 0]
@@ -435,9 +435,10 @@ def eval_pass(
     feature map ``feat`` (h, w, N) directly (gradients formed on the fly, float32; ``packed`` is then not
     read and may be a (1, 1, 3, N) placeholder). r_c = (a·F_ref,c + b) − F_c.
 
-    Good/bad: Σ_c r_c² < N·good_c + good_g·Σ_c |∇F_c|² (LSD-SLAM's r²/(40² + 0.25|∇I|²) < 1 for N=1,
-    averaged over channels). Weights per channel: w_p = 1/(noise2 + var_weight·σ_d²·(g_c·(g0, g1))²), Huber on
-    e = |r_c|√w_p with threshold ``huber_half``; W = w_h·w_p. ``prm`` holds the scalars (see ``P_*``).
+    Good/bad: Σ_c r_c² < good_c + good_g·Σ_c |∇F_c|² (LSD-SLAM's r²/(40² + 0.25|∇I|²) < 1 for N=1; the
+    caller scales good_c by the channel rule's ``good`` factor, N·40² for the channel mean). Weights per
+    channel: w_p = 1/(noise2 + var_weight·σ_d²·(g_c·(g0, g1))²), Huber on e = |r_c|√w_p with threshold
+    ``huber_half``; W = w_h·w_p. ``prm`` holds the scalars (see ``P_*``).
 
     Writes ``buf[i] = (x', y', z', Sxx, Sxy, Syy, sx, sy)`` for every in-image point i and zeros for the
     others (z' = 0 marks them). Sums are formed per block of :data:`BLOCK` points and combined in order.
@@ -507,7 +508,6 @@ def eval_pass_numpy(
     fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr = (
         float(x) for x in prm[:N_PARAMS]
     )
-    nch = ref_vals.shape[1]
     h, w = feat.shape[:2]
     if packed.shape[:2] != (h, w):
         from dmtrack.odometry.frame import pack_numpy
@@ -555,7 +555,7 @@ def eval_pass_numpy(
         aff = (0.0, 0.0, 0.0, 0.0, 0.0)
     r2sum = np.sum(r * r, axis=1)
     g2sum = np.sum(gx * gx + gy * gy, axis=1)
-    is_good = r2sum < nch * good_c + good_g * g2sum
+    is_good = r2sum < good_c + good_g * g2sum
     if write_flags:
         flags[ref_idx[inside]] = is_good
     wx, wy, wz = X[:, 0], X[:, 1], X[:, 2]

@@ -62,8 +62,6 @@ class TrackerConfig:
     """Tracking good only if good/(good+bad) > this."""
     min_inlier_fraction: float = 0.01
     """Diverged if in-image points < fraction·(w>>l)(h>>l) at a level."""
-    channel_weight: Literal["sum", "mean"] = "sum"
-    """Channel reduction of the cost: "sum" (squared L2 over channels, the paper) or "mean" (÷N)."""
 
     def __post_init__(self) -> None:
         if not self.levels:
@@ -72,10 +70,60 @@ class TrackerConfig:
             raise InputError(f"tracker.levels {self.levels} must be strictly decreasing (coarse to fine)")
         if any(lv < 0 or lv >= len(self.max_its) for lv in self.levels):
             raise InputError(f"tracker.levels {self.levels} outside 0..{len(self.max_its) - 1}")
-        if self.channel_weight not in ("sum", "mean"):
-            raise InputError(f"tracker.channel_weight must be 'sum' or 'mean', not {self.channel_weight!r}")
         if self.huber_d <= 0 or self.camera_pixel_noise2 <= 0:
             raise InputError("tracker.huber_d and tracker.camera_pixel_noise2 must be positive")
+
+
+#: Values of ``VOConfig.channel_cost``.
+CHANNEL_COSTS = ("balanced", "sum", "mean")
+
+#: Keys that were replaced, with the message that says by what.
+RENAMED_KEYS = {
+    "tracker.channel_weight": "tracker.channel_weight was replaced by channel_cost (balanced, sum or mean)",
+    "depth.ssd_reduction": "depth.ssd_reduction was replaced by channel_cost (balanced, sum or mean)",
+}
+
+
+@dataclass(frozen=True)
+class ChannelRule:
+    """The channel reductions of :attr:`VOConfig.channel_cost` for an N-channel feature map.
+
+    ``residual``: factor applied to every sum over channels of squared residuals or squared differences (the
+    tracker's error, the stereo SSD, the propagation colour test). ``info``: factor applied, on top of
+    ``residual``, to the gradient sums that act as information (the photometric disparity variance and the
+    epipolar-gradient gate), so that information = Σ_c g_c² · residual · info. ``good``: factor of the
+    constant of the tracker's good/bad test Σ_c r_c² < good·40² + ¼Σ_c|∇F_c|². All are exactly 1 for N = 1 in
+    every mode.
+
+    ``"sum"``: (1, 1, N); ``"mean"``: (1/N, 1, N); ``"balanced"``: (1/N_E, κ·N_E/N, N_E) with N_E =
+    ``energy_channels`` and κ = ``info_channels`` (N and 1 when unknown). The good/bad test of ``"sum"`` and
+    ``"mean"`` is the channel mean (N·40²), as it always was.
+    """
+
+    residual: float
+    info: float
+    good: float = 1.0
+
+    @classmethod
+    def of(
+        cls,
+        channel_cost: str,
+        n_channels: int,
+        info_channels: float | None = None,
+        energy_channels: float | None = None,
+    ) -> ChannelRule:
+        if channel_cost not in CHANNEL_COSTS:
+            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {channel_cost!r}")
+        n = int(n_channels)
+        if n <= 1:
+            return cls(1.0, 1.0, 1.0)
+        if channel_cost == "sum":
+            return cls(1.0, 1.0, float(n))
+        if channel_cost == "mean":
+            return cls(1.0 / n, 1.0, float(n))
+        n_e = float(n) if energy_channels is None else float(energy_channels)
+        kappa = 1.0 if info_channels is None else float(info_channels)
+        return cls(1.0 / n_e, kappa * n_e / n, n_e)
 
 
 #: Values of ``DepthConfig.update_variance`` (the kernels encode them by position).
@@ -158,16 +206,12 @@ class DepthConfig:
     ``"raw-search"`` (default): the search interval uses the pixel's own (raw) variance where it is larger; the
     consistency test stays LSD-SLAM's. ``"raw"``: both use it. Measured over 10 seeds in
     docs/lsd-slam-fidelity.md; the tracker's point weights always use the smoothed variance."""
-    ssd_reduction: Literal["sum", "mean"] = "sum"
-    """How SSD-type costs reduce over channels: "sum" (squared L2) or "mean" (divided by N)."""
 
     def __post_init__(self) -> None:
         if self.update_variance not in UPDATE_VARIANCE_MODES:
             raise InputError(
                 f"depth.update_variance must be 'smoothed', 'raw-search' or 'raw', not {self.update_variance!r}"
             )
-        if self.ssd_reduction not in ("sum", "mean"):
-            raise InputError(f"depth.ssd_reduction must be 'sum' or 'mean', not {self.ssd_reduction!r}")
 
 
 @dataclass(frozen=True)
@@ -206,12 +250,38 @@ class VOConfig:
     (its tracker runs while the previous frame is still being mapped); 0 is strictly sequential."""
     stop_on_loss: bool = True
     """Stop processing at the first tracking loss (the paper counts tracked frames until failure)."""
+    channel_cost: Literal["balanced", "sum", "mean"] = "balanced"
+    """How the N channels of a feature enter every grey-tuned quantity (docs/multichannel-cost.md).
+    ``"balanced"`` (default): residual-type quantities (the tracker's error and its ``initialTrackedResidual``,
+    the stereo SSD and its acceptance, the propagation colour test) are means over channels, so LSD-SLAM's
+    thresholds keep their per-channel meaning; information-type quantities (the photometric disparity variance
+    ``4σ²/gradAlongLine`` and the epipolar-gradient gate) count ``info_channels`` grey-equivalent observations.
+    ``"sum"``: the paper's literal squared L2 norm over channels everywhere. ``"mean"``: ÷N everywhere. All three
+    are the same for N = 1."""
+    info_channels: float | None = None
+    """Grey-equivalent number of independent channels κ of the feature, used by ``channel_cost="balanced"``:
+    the information σ_g²·gᵀC⁻¹g of a feature gradient g under the feature's noise covariance C (image noise
+    pushed through the feature), relative to the channel mean of |g|², measured once per feature
+    (:func:`dmtrack.features.scale.measure_info_channels`, ``default_scales.json``). ``None``: the feature's
+    calibrated value (:func:`dmtrack.track` fills it in), or 1 for a feature map of unknown origin."""
+    energy_channels: float | None = None
+    """Gradient-energy channel count N_E of the feature, used by ``channel_cost="balanced"``: E[Σ_c|∇F_c|²] /
+    E[|∇I|²] on the calibration images (grey = 1). The SSD-type sums are divided by N_E, so that a given
+    misalignment costs what it costs in grey — LSD-SLAM's stereo and residual thresholds are set in those units
+    (``MAX_ERROR_STEREO`` + 20·√gradAlongLine). ``None``: the feature's calibrated value (filled in by
+    :func:`dmtrack.track`), or N for a feature map of unknown origin."""
     init: str = "random"
     """How the first keyframe's depth starts: ``"random"`` (LSD-SLAM's seeded random inverse depth, the paper's
     setting) or ``"groundtruth"`` (the dataset's depth of the first frame, as LSD-SLAM's ``gtDepthInit``:
     variance 0.01², metric scale; needs a depth image registered to the camera)."""
 
     def __post_init__(self) -> None:
+        if self.channel_cost not in CHANNEL_COSTS:
+            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {self.channel_cost!r}")
+        for key in ("info_channels", "energy_channels"):
+            v = getattr(self, key)
+            if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf")):
+                raise InputError(f"{key} must be a positive number, not {v!r}")
         if self.init not in ("random", "groundtruth"):
             raise InputError(f"init must be 'random' or 'groundtruth', not {self.init!r}")
         if self.map_lag < 0:
@@ -294,7 +364,8 @@ class VOConfig:
                     raise InputError(f"override {item!r}: unknown section {part!r}")
                 node = node[part]
             if parts[-1] not in node:
-                raise InputError(f"override {item!r}: unknown key {parts[-1]!r}")
+                hint = RENAMED_KEYS.get(".".join(p.strip() for p in parts))
+                raise InputError(f"override {item!r}: {hint or f'unknown key {parts[-1]!r}'}")
             node[parts[-1]] = value
         return VOConfig.from_dict(data)
 
@@ -331,7 +402,8 @@ def _build(cls: type, data: dict[str, Any], section: str, path: str | Path | Non
     kwargs = {}
     for key, value in data.items():
         if key not in names:
-            raise InputError(f"unknown configuration key {section}.{key}", path=path)
+            hint = RENAMED_KEYS.get(f"{section}.{key}")
+            raise InputError(hint or f"unknown configuration key {section}.{key}", path=path)
         kwargs[key] = _coerce(cls, key, value, f"{section}.{key}", path)
     try:
         return cls(**kwargs)

@@ -13,8 +13,10 @@ single-threaded mapping:
    it into the new keyframe, runs regularize(true) / fill holes / regularize(false) there and normalises the
    new map's mean inverse depth to 1 (factor ``scale_from_parent``).
 
-N-channel rule (§4): every SSD-type quantity is the squared L2 norm over channels — summed (``"sum"``,
-default) or averaged (``"mean"``) according to ``DepthConfig.ssd_reduction`` — and the gradient gate uses the
+N-channel rule (§4, docs/multichannel-cost.md): every SSD-type quantity is the squared L2 norm over channels,
+averaged (``channel_cost="balanced"``, the default, and ``"mean"``) or summed (``"sum"``, the paper's literal
+cost); with ``"balanced"`` the gradient sums that act as information (the photometric disparity variance and
+the epipolar-gradient gate) count κ = ``info_channels`` grey-equivalent channels. The gradient gate uses the
 frame's ``max_grad`` (mean over channels of |∇F_c|, then a 3×3 max). All LSD-SLAM thresholds are kept.
 
 Checked against LSD-SLAM itself (``tools/lsd_oracle``: the same pre-state, pose, flags and residual replayed
@@ -54,7 +56,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.odometry import _depth_kernels as dk
-from dmtrack.odometry.config import DepthConfig
+from dmtrack.odometry.config import ChannelRule, DepthConfig
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.odometry.frame import Frame
@@ -103,11 +105,25 @@ class DepthMap:
         Wall time of the stages of the last :meth:`update` / :meth:`create_keyframe` (milliseconds).
     """
 
-    def __init__(self, config: DepthConfig | None = None, *, use_numba: bool = True, parallel: bool = False):
+    def __init__(
+        self,
+        config: DepthConfig | None = None,
+        *,
+        use_numba: bool = True,
+        parallel: bool = False,
+        channel_cost: str = "balanced",
+        info_channels: float | None = None,
+        energy_channels: float | None = None,
+    ):
         self.config = config if config is not None else DepthConfig()
         self.use_numba = bool(use_numba)
         self.parallel = bool(parallel)
+        ChannelRule.of(channel_cost, 1)  # validates the name
+        self.channel_cost = channel_cost
+        self.info_channels = info_channels
+        self.energy_channels = energy_channels
         self._prm = dk.make_params(self.config)
+        self._prm_by_n: dict[int, np.ndarray] = {}
         self.keyframe: Frame | None = None
         self._set_state(dk.empty_state((0, 0)))
         self.n_updates = 0
@@ -158,7 +174,7 @@ class DepthMap:
 
     def copy(self) -> DepthMap:
         """Deep copy of the per-pixel state (the keyframe is shared)."""
-        out = DepthMap(self.config, use_numba=self.use_numba, parallel=self.parallel)
+        out = self._sibling()
         out.keyframe = self.keyframe
         out._set_state(tuple(a.copy() for a in self.state))
         out.n_updates = self.n_updates
@@ -166,9 +182,32 @@ class DepthMap:
         out.T_new_old = None if self.T_new_old is None else self.T_new_old.copy()
         return out
 
+    def _sibling(self) -> DepthMap:
+        """An empty map with the same configuration."""
+        return DepthMap(
+            self.config,
+            use_numba=self.use_numba,
+            parallel=self.parallel,
+            channel_cost=self.channel_cost,
+            info_channels=self.info_channels,
+            energy_channels=self.energy_channels,
+        )
+
+    def channel_rule(self, frame: Frame) -> ChannelRule:
+        """The channel reductions for ``frame``'s channel count (:class:`ChannelRule`)."""
+        return ChannelRule.of(self.channel_cost, frame.n_channels, self.info_channels, self.energy_channels)
+
     def _cscale(self, frame: Frame) -> float:
-        """Channel reduction factor: 1 (sum over channels) or 1/N (mean)."""
-        return 1.0 if self.config.ssd_reduction == "sum" else 1.0 / frame.n_channels
+        """Residual reduction factor of the channel rule: 1 (sum over channels) or 1/N."""
+        return self.channel_rule(frame).residual
+
+    def _params(self, frame: Frame) -> np.ndarray:
+        """The kernels' parameter vector, with the channel rule's information factor for ``frame``."""
+        n = frame.n_channels
+        prm = self._prm_by_n.get(n)
+        if prm is None:
+            prm = self._prm_by_n[n] = dk.make_params(self.config, self.channel_rule(frame).info)
+        return prm
 
     def _require(self) -> Frame:
         if self.keyframe is None:
@@ -281,7 +320,7 @@ class DepthMap:
             frame.levels[0].feat,
             good,
             geo,
-            self._prm,
+            self._params(kf),
             self._cscale(kf),
             int(frame.index),
             skip_ratio,
@@ -400,7 +439,7 @@ class DepthMap:
             float(cam.fy),
             float(cam.cx),
             float(cam.cy),
-            self._prm,
+            self._params(old_kf),
             self._cscale(old_kf),
         )
         if self.use_numba:
@@ -408,7 +447,7 @@ class DepthMap:
         else:
             new_state, pcounts = dk.propagate_reference(*args)
         t2 = time.perf_counter()
-        child = DepthMap(self.config, use_numba=self.use_numba, parallel=self.parallel)
+        child = self._sibling()
         child.keyframe = new_keyframe
         child._set_state(new_state)
         keep = self.config.val_sum_min_for_keep

@@ -5,7 +5,8 @@ A faithful port of LSD-SLAM's ``SE3Tracker::trackFrame`` generalised to N-channe
 * levels ``config.levels`` (4 → 1), ``config.max_its[level]`` iterations each (level 4: 0, it only evaluates);
 * per evaluation: warp every reference point, keep it if it projects into 1 < u < w−2, 1 < v < h−2,
   bilinear (F_c, ∂F_c) per channel, residual r_c = (a·F_ref,c + b) − F_c, depth-variance weight and Huber per
-  channel, error E = Σ W r² / #in-image points (÷N too with ``channel_weight="mean"``);
+  channel, error E = Σ W r² / #in-image points, ÷N too unless ``channel_cost="sum"`` (the error, and with it
+  ``initialTrackedResidual``, is a per-channel mean; the step itself does not depend on that factor);
 * the 6×6 normal equations are accumulated on the fly through per-point 2×2 sums (see
   :mod:`dmtrack.odometry._tracker_kernels`);
 * LM schedule: accept if E decreases (stop the level when E_new/E_last > ``convergence_eps``; λ ← 0 if
@@ -34,7 +35,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.odometry import _tracker_kernels as K
-from dmtrack.odometry.config import TrackerConfig
+from dmtrack.odometry.config import ChannelRule, TrackerConfig
 from dmtrack.odometry.frame import Frame
 
 _PLACEHOLDERS: dict[int, np.ndarray] = {}
@@ -232,6 +233,13 @@ class Tracker:
         ``parallel=False``, whatever the thread count.
     parallel_min_points : int
         See ``parallel``.
+    channel_cost : str
+        :attr:`VOConfig.channel_cost <dmtrack.odometry.config.VOConfig.channel_cost>`: ``"sum"`` sums the
+        error over channels, ``"mean"`` averages it, ``"balanced"`` divides it by ``energy_channels`` N_E
+        (the good/bad test's constant is N·40² for "sum"/"mean", N_E·40² for "balanced"; see
+        :class:`~dmtrack.odometry.config.ChannelRule`).
+    energy_channels : float, optional
+        N_E of the feature (``VOConfig.energy_channels``); N when None.
     """
 
     def __init__(
@@ -240,8 +248,13 @@ class Tracker:
         use_numba: bool = True,
         parallel: bool = False,
         parallel_min_points: int = 4 * K.BLOCK,
+        channel_cost: str = "balanced",
+        energy_channels: float | None = None,
     ):
         self.config = config if config is not None else TrackerConfig()
+        self.channel_cost = channel_cost
+        self.energy_channels = energy_channels
+        ChannelRule.of(channel_cost, 1)  # validates the name
         self.use_numba = use_numba
         self.parallel = parallel
         self.parallel_min_points = int(parallel_min_points)
@@ -271,6 +284,7 @@ class Tracker:
         buf: np.ndarray,
         ch_scale: float,
         eval_fn: Any = None,
+        good_fac: float = 1.0,
     ) -> _Eval:
         cfg = self.config
         cam = frame_level.camera
@@ -284,7 +298,7 @@ class Tracker:
             cfg.var_weight,
             cfg.camera_pixel_noise2,
             cfg.huber_d / 2.0,
-            cfg.good_residual**2,
+            good_fac * cfg.good_residual**2,
             cfg.good_grad_weight**2,
             cfg.affine_huber,
         )
@@ -350,7 +364,9 @@ class Tracker:
         if cfg.affine and frame.n_channels != 1:
             raise InputError("affine brightness estimation (Gray-A) needs a 1-channel feature")
         nch = frame.n_channels
-        ch_scale = 1.0 if cfg.channel_weight == "sum" else 1.0 / nch
+        rule = ChannelRule.of(self.channel_cost, nch, None, self.energy_channels)
+        ch_scale = rule.residual
+        good_fac = rule.good
 
         T = np.array(T_fk_init, dtype=np.float64, copy=True)
         if T.shape != (4, 4):
@@ -392,7 +408,7 @@ class Tracker:
             bufs = [np.empty((rl.n_points, K.BUF_COLS)), np.empty((rl.n_points, K.BUF_COLS))]
             eval_fn, update_fn = self._kernels(rl.n_points)
             cur = 0
-            ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale, eval_fn)
+            ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale, eval_fn, good_fac)
             evaluations[lvl] = 1
             iterations[lvl] = 0
             last = ev
@@ -414,7 +430,9 @@ class Tracker:
                     inc = self._solve(A, bvec, lam)
                     inc_try += 1
                     T_new = K.se3_exp(inc) @ T
-                    trial = self._evaluate(rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale, eval_fn)
+                    trial = self._evaluate(
+                        rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale, eval_fn, good_fac
+                    )
                     evaluations[lvl] += 1
                     last = trial
                     if trial.n_in < thr:

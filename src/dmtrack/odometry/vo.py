@@ -234,7 +234,13 @@ class VisualOdometry:
         self.sink = sink
         self.use_numba = use_numba
         self.parallel = bool(parallel)
-        self.tracker = Tracker(self.config.tracker, use_numba=use_numba, parallel=self.parallel)
+        self.tracker = Tracker(
+            self.config.tracker,
+            use_numba=use_numba,
+            parallel=self.parallel,
+            channel_cost=self.config.channel_cost,
+            energy_channels=self.config.energy_channels,
+        )
         self._levels = tuple(self.config.tracker.levels)
         # state of the current keyframe
         self._kf: Frame | None = None
@@ -400,7 +406,14 @@ class VisualOdometry:
 
     def _initialize(self, frame: Frame, pyramid_ms: float, depth: np.ndarray | None = None) -> FrameResult:
         t0 = time.perf_counter()
-        dm = DepthMap(self.config.depth, use_numba=self.use_numba, parallel=self.parallel)
+        dm = DepthMap(
+            self.config.depth,
+            use_numba=self.use_numba,
+            parallel=self.parallel,
+            channel_cost=self.config.channel_cost,
+            info_channels=self.config.info_channels,
+            energy_channels=self.config.energy_channels,
+        )
         if self.config.init == "groundtruth":
             if depth is None:
                 raise InputError("init='groundtruth' needs the first frame's depth image")

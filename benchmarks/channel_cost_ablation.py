@@ -41,14 +41,6 @@ METRICS = ("rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse")
 DEFAULT_VARIANTS = {"sum": ["channel_cost=sum"], "mean": ["channel_cost=mean"], "balanced": ["channel_cost=balanced"]}
 
 
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
-    return out
-
-
 def _job(job: tuple) -> list[dict]:
     seq_key, path, opts, r_l, feature, variants, seeds, max_frames, rows_file = job
     os.environ["NUMBA_NUM_THREADS"] = "1"
@@ -146,7 +138,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     a = ap.parse_args(argv)
-    seeds = _seeds(a.seeds)
+    from dmtrack.experiments.runner import parse_seeds
+
+    seeds = parse_seeds(a.seeds)
     variants = dict(DEFAULT_VARIANTS)
     if a.variant:
         variants = {}

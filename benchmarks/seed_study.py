@@ -29,14 +29,6 @@ REPO = Path(__file__).resolve().parents[1]
 METRICS = ("rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse")
 
 
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
-    return out
-
-
 def _fraction(text: str | None) -> float | None:
     if text is None:
         return None
@@ -87,7 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
     ap.add_argument("--name", default=None)
     a = ap.parse_args(argv)
-    seeds = _seeds(a.seeds)
+    from dmtrack.experiments.runner import parse_seeds
+
+    seeds = parse_seeds(a.seeds)
     jobs = [(a.sequence, a.feature, tuple(a.set), s, a.max_frames, _fraction(a.r_l), a.intrinsics) for s in seeds]
     with ProcessPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         rows = []

@@ -133,8 +133,8 @@ def test_line_stereo_recovers_plane_inverse_depth(seeds):
     assert np.all(res[ok, 5] > 0)
 
 
-def test_mean_reduction_over_identical_channels_equals_grey():
-    """With the channel mean (cscale 1/N), three identical channels must behave exactly like one."""
+def _grey_and_three_copies():
+    """A grey keyframe/frame pair, the same pair as three identical channels, and the keyframe→frame motion."""
     cam = _camera(128, 96)
     T_wc = _motion(6)
     kf1, _ = _frame(0, cam, np.eye(4), (1,))
@@ -142,6 +142,12 @@ def test_mean_reduction_over_identical_channels_equals_grey():
     kf3, _ = _frame(0, cam, np.eye(4), (1, 1, 1))
     fr3, _ = _frame(6, cam, T_wc, (1, 1, 1))
     T_fk = np.linalg.inv(T_wc)
+    return kf1, fr1, kf3, fr3, T_fk
+
+
+def test_mean_reduction_over_identical_channels_equals_grey():
+    """With the channel mean (cscale 1/N), three identical channels must behave exactly like one."""
+    kf1, fr1, kf3, fr3, T_fk = _grey_and_three_copies()
     r1 = _stereo_all(kf1, fr1, T_fk, DepthConfig(), 1.0)
     r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0)
     assert r1.shape == r3.shape
@@ -170,13 +176,7 @@ def test_information_factor_counts_channels_as_independent_observations():
     matches, with the photometric variance of grey at a third of the pixel noise (σ² / 3): the same stereo as
     grey with camera_pixel_noise2 = 16/3 wherever the gradient gates agree. Numba and reference agree.
     """
-    cam = _camera(128, 96)
-    T_wc = _motion(6)
-    kf1, _ = _frame(0, cam, np.eye(4), (1,))
-    fr1, _ = _frame(6, cam, T_wc, (1,))
-    kf3, _ = _frame(0, cam, np.eye(4), (1, 1, 1))
-    fr3, _ = _frame(6, cam, T_wc, (1, 1, 1))
-    T_fk = np.linalg.inv(T_wc)
+    kf1, fr1, kf3, fr3, T_fk = _grey_and_three_copies()
     r1 = _stereo_all(kf1, fr1, T_fk, DepthConfig(camera_pixel_noise2=16.0 / 3.0), 1.0)
     r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, info=3.0)
     r3_ref = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, fn=dk.line_stereo_reference, info=3.0)

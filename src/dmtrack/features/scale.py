@@ -365,13 +365,14 @@ def measure_channel_statistics(
         cov += d.T @ d
         mean += d.sum(axis=0)
         count += d.shape[0]
-        dg = grey.compute(noisy).astype(np.float64) - grey.compute(img).astype(np.float64)
+        grey_clean = grey.compute(img).astype(np.float64)
+        dg = grey.compute(noisy).astype(np.float64) - grey_clean
         grey_d.append(dg[b:-b, b:-b].ravel())
         gx = 0.5 * (clean[b:-b, b + 1 : -b + 1] - clean[b:-b, b - 1 : -b - 1])
         gy = 0.5 * (clean[b + 1 : -b + 1, b:-b] - clean[b - 1 : -b - 1, b:-b])
         g_parts += [gx.reshape(-1, n)[::stride], gy.reshape(-1, n)[::stride]]
         energy += float(np.mean(np.sum(gx * gx + gy * gy, axis=-1)))
-        gi = grey.compute(img).astype(np.float64)[..., 0]
+        gi = grey_clean[..., 0]
         gix = 0.5 * (gi[b:-b, b + 1 : -b + 1] - gi[b:-b, b - 1 : -b - 1])
         giy = 0.5 * (gi[b + 1 : -b + 1, b:-b] - gi[b - 1 : -b - 1, b:-b])
         grey_energy += float(np.mean(gix * gix + giy * giy))

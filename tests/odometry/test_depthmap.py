@@ -17,7 +17,23 @@ import pytest
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.odometry import _depth_kernels as dk
+from dmtrack.odometry._depth_common import (
+    PC_CREATED,
+    PC_DROPPED_GOOD,
+    PC_MERGED,
+    PC_OCCLUDED,
+    empty_state,
+    make_params,
+    stereo_geometry,
+)
+from dmtrack.odometry._depth_propagate import propagate_numba, propagate_reference
+from dmtrack.odometry._depth_regularize import (
+    fill_holes_numba,
+    fill_holes_reference,
+    regularize_numba,
+    regularize_reference,
+)
+from dmtrack.odometry._epipolar_stereo import epl_check_reference, line_stereo_numba, line_stereo_reference
 from dmtrack.odometry.config import DepthConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import build_frame
@@ -90,16 +106,16 @@ def _candidates(kf, geo, prm, cscale):
         for x in range(3, w - 3):
             if lv.max_grad[y, x] < 5.0:
                 continue
-            ok, ex, ey = dk.epl_check_reference(lv.gx, lv.gy, x, y, geo, prm, cscale)
+            ok, ex, ey = epl_check_reference(lv.gx, lv.gy, x, y, geo, prm, cscale)
             if ok:
                 out.append((x, y, ex, ey))
     return out
 
 
-def _stereo_all(kf, fr, T_fk, cfg, cscale, fn=dk.line_stereo_numba, ranges=None, info=1.0):
+def _stereo_all(kf, fr, T_fk, cfg, cscale, fn=line_stereo_numba, ranges=None, info=1.0):
     cam = kf.camera
-    geo = dk.stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, T_fk, 0.0)
-    prm = dk.make_params(cfg, info)
+    geo = stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, T_fk, 0.0)
+    prm = make_params(cfg, info)
     lv = kf.levels[0]
     rows = []
     for x, y, ex, ey in _candidates(kf, geo, prm, cscale):
@@ -179,7 +195,7 @@ def test_information_factor_counts_channels_as_independent_observations():
     kf1, fr1, kf3, fr3, T_fk = _grey_and_three_copies()
     r1 = _stereo_all(kf1, fr1, T_fk, DepthConfig(camera_pixel_noise2=16.0 / 3.0), 1.0)
     r3 = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, info=3.0)
-    r3_ref = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, fn=dk.line_stereo_reference, info=3.0)
+    r3_ref = _stereo_all(kf3, fr3, T_fk, DepthConfig(), 1.0 / 3.0, fn=line_stereo_reference, info=3.0)
     np.testing.assert_allclose(r3_ref, r3, rtol=1e-6, atol=1e-9, equal_nan=True)
     # the epipolar-gradient gate sees 3× the information: a superset of grey's candidates
     index = {(int(x), int(y)): i for i, (x, y) in enumerate(r3[:, :2])}
@@ -224,8 +240,8 @@ def test_line_stereo_kernel_matches_reference(seeds):
     T_fk = np.linalg.inv(T_wc)
     cfg = DepthConfig()
     for ranges in (None, lambda x, y: (0.8 / z0[y, x], 1.0 / z0[y, x], 1.2 / z0[y, x])):
-        a = _stereo_all(kf, fr, T_fk, cfg, cscale, dk.line_stereo_numba, ranges)
-        b = _stereo_all(kf, fr, T_fk, cfg, cscale, dk.line_stereo_reference, ranges)
+        a = _stereo_all(kf, fr, T_fk, cfg, cscale, line_stereo_numba, ranges)
+        b = _stereo_all(kf, fr, T_fk, cfg, cscale, line_stereo_reference, ranges)
         assert len(a) > 300
         np.testing.assert_array_equal(np.minimum(a[:, 2], 0), np.minimum(b[:, 2], 0))
         ok = a[:, 2] >= 0
@@ -397,7 +413,7 @@ def test_updates_converge_to_true_inverse_depth(seeds):
 def _random_state(h: int, w: int, seed: int, density: float = 0.7, max_validity: int = 40):
     """A plausible state: two depth layers, random validity / variances."""
     rng = np.random.default_rng(seed)
-    st = dk.empty_state((h, w))
+    st = empty_state((h, w))
     valid, bl, nx, val, d, v, ds, vs = st
     valid[:] = rng.random((h, w)) < density
     layer = (np.arange(w)[None, :] + 3 * np.sin(np.arange(h)[:, None] / 4.0)) > w / 2
@@ -418,8 +434,8 @@ def _copy(st):
 def test_regularize_kernel_matches_reference(remove_occlusions):
     st = _random_state(48, 64, 5, density=0.5, max_validity=10)
     a, b = _copy(st), _copy(st)
-    dk.regularize_numba(a, remove_occlusions, 24.0, 0.075**2)
-    dk.regularize_reference(b, remove_occlusions, 24.0, 0.075**2)
+    regularize_numba(a, remove_occlusions, 24.0, 0.075**2)
+    regularize_reference(b, remove_occlusions, 24.0, 0.075**2)
     for i in (0, 1, 2, 3, 4, 5):
         np.testing.assert_array_equal(a[i], b[i])
     v = a[0]
@@ -435,18 +451,18 @@ def test_parallel_regularize_and_fill_holes_are_identical(remove_occlusions):
 
     st = _random_state(48, 64, 5, density=0.5, max_validity=10)
     mg = np.random.default_rng(1).uniform(0, 12, (48, 64)).astype(np.float32)
-    prm = dk.make_params(DepthConfig())
+    prm = make_params(DepthConfig())
     a, b = _copy(st), _copy(st)
-    dk.regularize_numba(a, remove_occlusions, 24.0, 0.075**2, parallel=False)
-    dk.regularize_numba(b, remove_occlusions, 24.0, 0.075**2, parallel=True)
-    dk.fill_holes_numba(a, mg, prm, parallel=False)
-    dk.fill_holes_numba(b, mg, prm, parallel=True)
+    regularize_numba(a, remove_occlusions, 24.0, 0.075**2, parallel=False)
+    regularize_numba(b, remove_occlusions, 24.0, 0.075**2, parallel=True)
+    fill_holes_numba(a, mg, prm, parallel=False)
+    fill_holes_numba(b, mg, prm, parallel=True)
     prev = numba.get_num_threads()
     c = _copy(st)
     try:
         numba.set_num_threads(1)  # one thread through the parallel build
-        dk.regularize_numba(c, remove_occlusions, 24.0, 0.075**2, parallel=True)
-        dk.fill_holes_numba(c, mg, prm, parallel=True)
+        regularize_numba(c, remove_occlusions, 24.0, 0.075**2, parallel=True)
+        fill_holes_numba(c, mg, prm, parallel=True)
     finally:
         numba.set_num_threads(prev)
     assert (a[0] != st[0]).any()  # the passes changed something
@@ -456,7 +472,7 @@ def test_parallel_regularize_and_fill_holes_are_identical(remove_occlusions):
 
 def test_regularize_semantics():
     h, w = 20, 20
-    st = dk.empty_state((h, w))
+    st = empty_state((h, w))
     valid, bl, _nx, val, d, v, ds, vs = st
     # a 7×7 block of constant inverse depth 0.8, var 0.01, validity 5
     valid[5:12, 5:12] = True
@@ -468,7 +484,7 @@ def test_regularize_semantics():
     d[16, 16] = 0.5
     v[16, 16] = 0.01
     val[16, 16] = 20
-    dk.regularize_numba(st, False, 24.0, 0.075**2)
+    regularize_numba(st, False, 24.0, 0.075**2)
     assert not valid[16, 16] and bl[16, 16] == -1
     assert valid[8, 8] and ds[8, 8] == pytest.approx(0.8, rel=1e-6)
     expect = 1.0 / sum(1.0 / (0.01 + (dx * dx + dy * dy) * 0.075**2) for dx in range(-2, 3) for dy in range(-2, 3))
@@ -477,7 +493,7 @@ def test_regularize_semantics():
     assert valid[5, 5]
 
     # occlusion: a far pixel surrounded by (inconsistent) closer ones
-    st = dk.empty_state((h, w))
+    st = empty_state((h, w))
     valid, bl, _nx, val, d, v, ds, vs = st
     valid[5:12, 5:12] = True
     d[5:12, 5:12] = 1.0
@@ -486,9 +502,9 @@ def test_regularize_semantics():
     d[8, 8] = 0.3
     val[8, 8] = 30
     st2 = _copy(st)
-    dk.regularize_numba(st, True, 24.0, 0.075**2)
+    regularize_numba(st, True, 24.0, 0.075**2)
     assert not st[0][8, 8] and st[1][8, 8] == 0  # occluded: invalid, not blacklisted
-    dk.regularize_numba(st2, False, 24.0, 0.075**2)
+    regularize_numba(st2, False, 24.0, 0.075**2)
     assert st2[0][8, 8] and st2[6][8, 8] == pytest.approx(0.3, rel=1e-6)  # kept, not smeared
 
 
@@ -496,10 +512,10 @@ def test_regularize_semantics():
 def test_fill_holes_kernel_matches_reference():
     st = _random_state(48, 64, 9)
     mg = np.random.default_rng(1).uniform(0, 12, (48, 64)).astype(np.float32)
-    prm = dk.make_params(DepthConfig())
+    prm = make_params(DepthConfig())
     a, b = _copy(st), _copy(st)
-    dk.fill_holes_numba(a, mg, prm)
-    dk.fill_holes_reference(b, mg, prm)
+    fill_holes_numba(a, mg, prm)
+    fill_holes_reference(b, mg, prm)
     for i in range(6):
         np.testing.assert_array_equal(a[i], b[i])
     filled = a[0] & ~st[0]
@@ -511,7 +527,7 @@ def test_fill_holes_kernel_matches_reference():
 def test_fill_holes_reads_a_copy():
     """Holes are filled from the hypotheses that existed before the pass (no cascading)."""
     h, w = 16, 24
-    st = dk.empty_state((h, w))
+    st = empty_state((h, w))
     valid, bl, _nx, val, d, v, _ds, _vs = st
     valid[4:11, 3:9] = True  # block, columns 3..8, idepth varying per column
     d[4:11, 3:9] = np.linspace(0.5, 1.0, 6)[None, :]
@@ -520,7 +536,7 @@ def test_fill_holes_reads_a_copy():
     bl[7, 11] = -2  # blacklisted: needs a sum > 100
     mg = np.full((h, w), 10.0, np.float32)
     mg[4, 9] = 1.0  # too little gradient: never filled
-    dk.fill_holes_numba(st, mg, dk.make_params(DepthConfig()))
+    fill_holes_numba(st, mg, make_params(DepthConfig()))
     # (7, 9): window columns 7..10 → 2 valid columns × 5 rows × 5 = 50 > 30: filled with the
     # inverse-variance mean of the original hypotheses only (not of (7, 9)'s filled neighbours)
     assert valid[7, 9] and val[7, 9] == 0 and v[7, 9] == np.float32(0.125)
@@ -529,14 +545,14 @@ def test_fill_holes_reads_a_copy():
     assert not valid[7, 10]
     assert not valid[4, 9]
     assert not valid[7, 11]  # blacklisted, sum 0
-    st2 = dk.empty_state((h, w))
+    st2 = empty_state((h, w))
     st2[0][2:13, 5:12] = True
     st2[3][2:13, 5:12] = 5
     st2[4][2:13, 5:12] = 0.7
     st2[5][2:13, 5:12] = 0.01
     st2[0][7, 8] = False
     st2[1][7, 8] = -5
-    dk.fill_holes_numba(st2, mg, dk.make_params(DepthConfig()))
+    fill_holes_numba(st2, mg, make_params(DepthConfig()))
     assert st2[0][7, 8] and st2[1][7, 8] == 0  # 5×5 sum 120 > 100: filled and un-blacklisted
 
 
@@ -568,7 +584,7 @@ def test_propagation_of_known_depth_to_new_keyframe():
 
 
 def _two_pixel_state(h, w, pixels):
-    st = dk.empty_state((h, w))
+    st = empty_state((h, w))
     for (x, y), d, var, val in pixels:
         st[0][y, x] = True
         st[4][y, x] = d
@@ -581,14 +597,14 @@ def _two_pixel_state(h, w, pixels):
 def test_propagation_variance_and_collisions():
     cam = _camera(64, 48)
     fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
-    prm = dk.make_params(DepthConfig())
+    prm = make_params(DepthConfig())
     mg = np.full((48, 64), 10.0, np.float32)
     feat = np.zeros((48, 64, 1), np.float32)
     # single pixel, move 0.25 forward: z 2 → 1.75, idepth 0.5 → 1/1.75, var × (d_new/d_old)^4
     st = _two_pixel_state(48, 64, [((20, 30), 0.5, 0.01, 17.0)])
     T = np.eye(4)
     T[2, 3] = -0.25
-    new, counts = dk.propagate_numba(st, mg, None, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
+    new, counts = propagate_numba(st, mg, None, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
     u = (20 - cx) * 2.0 / 1.75 + cx
     v = (30 - cy) * 2.0 / 1.75 + cy
     ny, nx = int(v + 0.5), int(u + 0.5)
@@ -596,35 +612,35 @@ def test_propagation_variance_and_collisions():
     assert new[4][ny, nx] == pytest.approx(1 / 1.75, rel=1e-6)
     assert new[5][ny, nx] == pytest.approx(0.01 * (2.0 / 1.75) ** 4, rel=1e-6)
     assert new[3][ny, nx] == 17.0 and new[6][ny, nx] == -1.0
-    assert counts[dk.PC_CREATED] == 1
+    assert counts[PC_CREATED] == 1
     # the flags are indexed by the OLD pixel at level 1
     good = np.ones((24, 32), bool)
     good[15, 10] = False
-    new, counts = dk.propagate_numba(st, mg, good, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
-    assert new[0].sum() == 0 and counts[dk.PC_DROPPED_GOOD] == 1
+    new, counts = propagate_numba(st, mg, good, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
+    assert new[0].sum() == 0 and counts[PC_DROPPED_GOOD] == 1
 
     # collisions under a sideways move: u_new = u + fx·tx·idepth
     def side(tx, pixels):
         T = np.eye(4)
         T[0, 3] = tx
         st = _two_pixel_state(48, 64, pixels)
-        return dk.propagate_numba(st, mg, None, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
+        return propagate_numba(st, mg, None, feat, feat, T, fx, fy, cx, cy, prm, 1.0)
 
     y = 20
     # consistent pair (same idepth, pure x shift keeps both) → separate pixels, no collision
     new, counts = side(2.0 / fx, [((20, y), 1.0, 0.01, 5.0), ((21, y), 1.0, 0.02, 5.0)])
-    assert counts[dk.PC_CREATED] == 2
+    assert counts[PC_CREATED] == 2
     # inconsistent, the second (in raster order) is farther: dropped
     new, counts = side(2.0 / fx, [((20, y), 1.0, 0.001, 5.0), ((21, y), 0.5, 0.001, 6.0)])
     assert new[0].sum() == 1 and new[0][y, 22] and new[4][y, 22] == pytest.approx(1.0)
-    assert counts[dk.PC_OCCLUDED] == 1
+    assert counts[PC_OCCLUDED] == 1
     # inconsistent, the second is closer: replaces the first
     new, counts = side(-2.0 / fx, [((20, y), 0.5, 0.001, 5.0), ((21, y), 1.0, 0.001, 6.0)])
     assert new[0].sum() == 1 and new[0][y, 19] and new[4][y, 19] == pytest.approx(1.0)
     assert new[3][y, 19] == 6.0
     # consistent collision: fused (inverse-variance), validity summed
     new, counts = side(2.0 / fx, [((20, y), 1.0, 0.5, 200.0), ((21, y), 0.5, 0.5, 100.0)])
-    assert counts[dk.PC_MERGED] == 1 and new[0].sum() == 1
+    assert counts[PC_MERGED] == 1 and new[0].sum() == 1
     assert new[4][y, 22] == pytest.approx(0.75, rel=1e-6)  # equal variances: plain mean
     assert new[5][y, 22] == pytest.approx(0.25, rel=1e-6)
     assert new[3][y, 22] == 255.0  # 300 capped at VALIDITY_COUNTER_MAX + MAX_VARIABLE
@@ -637,14 +653,14 @@ def test_propagation_kernel_matches_reference(with_flags):
     T_wc = _motion(5)
     new_kf, _ = _frame(5, cam, T_wc, (4, 5))
     rng = np.random.default_rng(2)
-    st = dk.empty_state((48, 64))
+    st = empty_state((48, 64))
     st[0][:] = rng.random((48, 64)) < 0.8
     st[4][:] = (1.0 / z0) * (1.0 + 0.02 * rng.standard_normal((48, 64)))
     st[6][:] = st[4] * (1.0 + 0.01 * rng.standard_normal((48, 64)))
     st[5][:] = rng.uniform(1e-5, 1e-3, (48, 64))
     st[3][:] = rng.integers(0, 100, (48, 64))
     good = rng.random((24, 32)) > 0.2 if with_flags else None
-    prm = dk.make_params(DepthConfig())
+    prm = make_params(DepthConfig())
     new_feat = new_kf.levels[0].feat.copy()
     new_feat[10:30, 20:40] += 60.0  # a "lighting change": fails the colour test where there are no flags
     args = (
@@ -660,10 +676,10 @@ def test_propagation_kernel_matches_reference(with_flags):
         prm,
         0.5,
     )
-    a, ca = dk.propagate_numba(st, *args)
-    b, cb = dk.propagate_reference(st, *args)
+    a, ca = propagate_numba(st, *args)
+    b, cb = propagate_reference(st, *args)
     np.testing.assert_array_equal(ca, cb)
-    assert ca[dk.PC_CREATED] > 500 and ca[dk.PC_MERGED] > 0 and ca[dk.PC_DROPPED_GOOD] > 0
+    assert ca[PC_CREATED] > 500 and ca[PC_MERGED] > 0 and ca[PC_DROPPED_GOOD] > 0
     for i in range(4):
         np.testing.assert_array_equal(a[i], b[i])
     np.testing.assert_allclose(a[4], b[4], rtol=1e-6)
@@ -700,7 +716,7 @@ def test_scale_normalisation_scales_variances_by_rho_squared():
     # redo the steps without the normalisation
     ref.finalize()
     cam0 = kf.camera
-    new_state, _ = dk.propagate_numba(
+    new_state, _ = propagate_numba(
         ref.state,
         new_kf.levels[0].max_grad,
         None,
@@ -711,7 +727,7 @@ def test_scale_normalisation_scales_variances_by_rho_squared():
         cam0.fy,
         cam0.cx,
         cam0.cy,
-        dk.make_params(DepthConfig()),
+        make_params(DepthConfig()),
         1.0,
     )
     raw = DepthMap()
@@ -773,19 +789,19 @@ def test_line_stereo_matches_lsd_slam_release_build(sample_dir):
     kf, fr = load(g["keyframe"]), load(g["frame"])
     T_kf = np.eye(4)
     T_kf[:3, :] = np.array(g["T_frame_to_keyframe"])
-    geo = dk.stereo_geometry(585.0, 585.0, 320.0, 240.0, np.linalg.inv(T_kf), g["initial_tracked_residual"])
-    prm = dk.make_params(DepthConfig())
+    geo = stereo_geometry(585.0, 585.0, 320.0, 240.0, np.linalg.inv(T_kf), g["initial_tracked_residual"])
+    prm = make_params(DepthConfig())
     lv = kf.levels[0]
     same = close = both = 0
     codes = {}
     for p in g["pixels"]:
         x, y = p["x"], p["y"]
-        ok, ex, ey = dk.epl_check_reference(lv.gx, lv.gy, x, y, geo, prm, 1.0)
+        ok, ex, ey = epl_check_reference(lv.gx, lv.gy, x, y, geo, prm, 1.0)
         assert ok, (x, y)
         sv = float(np.sqrt(np.float32(p["var_s"])))
         lo = max(0.0, float(np.float32(p["idepth_s"]) - 2 * sv))
         hi = min(20.0, float(np.float32(p["idepth_s"]) + 2 * sv))
-        err, idepth, var, _ = dk.line_stereo_numba(
+        err, idepth, var, _ = line_stereo_numba(
             lv.feat, fr.levels[0].feat, lv.gx, lv.gy, float(x), float(y), ex, ey, lo, p["idepth_s"], hi, geo, prm, 1.0
         )
         lsd_code = p["err"] if p["err"] < 0 else 0.0
@@ -808,15 +824,15 @@ def test_near_end_outside_the_image_is_out_of_bounds():
     kf, _ = _frame(0, cam, np.eye(4))
     T_wc = _pose((0.0, 0.0, 0.0), (-0.04, 0.0, 0.0))  # camera moves left: matches move right in the frame
     fr, _ = _frame(1, cam, T_wc)
-    geo = dk.stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, np.linalg.inv(T_wc), 0.0)
-    prm = dk.make_params(DepthConfig())
+    geo = stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, np.linalg.inv(T_wc), 0.0)
+    prm = make_params(DepthConfig())
     lv = kf.levels[0]
     results = {}
     for x, y, ex, ey in _candidates(kf, geo, prm, 1.0):
         args = (lv.feat, fr.levels[0].feat, lv.gx, lv.gy, float(x), float(y), ex, ey, 0.0, 1.0, 20.0, geo, prm, 1.0)
-        results[(x, y)] = dk.line_stereo_numba(*args)[0]
+        results[(x, y)] = line_stereo_numba(*args)[0]
         if x > cam.width - 7 - 29:
-            assert dk.line_stereo_reference(*args)[0] == -1.0
+            assert line_stereo_reference(*args)[0] == -1.0
     # the segment is cropped to 30 px from the far end (idepth 0 = the pixel itself, pure translation): from
     # x ≥ w − 7 − 31 (30 px + the one-step extension) its near end leaves the image
     near_border = [e for (x, _), e in results.items() if x > cam.width - 7 - 29]

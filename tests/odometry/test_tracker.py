@@ -1,4 +1,5 @@
-"""SE(3) tracker (dmtrack.odometry.tracker and _tracker_kernels).
+"""SE(3) tracker (dmtrack.odometry.tracker and its kernels: _tracker_points, _tracker_residuals,
+_tracker_normal_equations).
 
 Synthetic data: a textured plane rendered by ray casting (exact depth) from a keyframe pose and from a frame
 pose a known small motion away.
@@ -13,7 +14,15 @@ import pytest
 from dmtrack.errors import InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.geometry.lie import SE3
-from dmtrack.odometry import _tracker_kernels as K
+from dmtrack.odometry._tracker_normal_equations import (
+    se3_exp,
+    solve_damped,
+    warp_update,
+    warp_update_numpy,
+    warp_update_parallel,
+)
+from dmtrack.odometry._tracker_points import idepth_downsample, idepth_downsample_numpy, make_points, make_points_numpy
+from dmtrack.odometry._tracker_residuals import BUF_COLS, eval_params, eval_pass, eval_pass_numpy, eval_pass_parallel
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.odometry.frame import Frame, build_frame
 from dmtrack.odometry.tracker import Tracker, TrackingReference
@@ -120,7 +129,7 @@ def track(
 def test_idepth_downsample_semantics_and_numba_equals_numpy() -> None:
     d = np.array([[1.0, 2.0, 5.0, 5.0], [3.0, 4.0, 5.0, 5.0]], np.float32)
     v = np.array([[0.5, 0.25, -1.0, -1.0], [-1.0, 0.0, -1.0, -1.0]], np.float32)
-    for fn in (K.idepth_downsample, K.idepth_downsample_numpy):
+    for fn in (idepth_downsample, idepth_downsample_numpy):
         od, ov = fn(d, v)
         assert od.shape == (1, 2)
         # children 1 (var .5) and 2 (var .25) valid: (1/.5 + 2/.25) / (1/.5 + 1/.25) = 10/6; var = 2/6
@@ -130,7 +139,7 @@ def test_idepth_downsample_semantics_and_numba_equals_numpy() -> None:
     rng = np.random.default_rng(1)
     d = rng.uniform(0.2, 2.0, (48, 64)).astype(np.float32)
     v = np.where(rng.random((48, 64)) < 0.5, rng.uniform(1e-4, 0.1, (48, 64)), -1).astype(np.float32)
-    a, b = K.idepth_downsample(d, v), K.idepth_downsample_numpy(d, v)
+    a, b = idepth_downsample(d, v), idepth_downsample_numpy(d, v)
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
 
@@ -143,7 +152,7 @@ def test_make_points_numba_equals_numpy_and_backprojects() -> None:
     v = np.where(rng.random((h, w)) < 0.6, 0.01, -1).astype(np.float32)
     feat = rng.random((h, w, 3)).astype(np.float32)
     args = (d, v, feat, 30.0, 32.0, 15.5, 11.5)
-    out_nb, out_np = K.make_points(*args), K.make_points_numpy(*args)
+    out_nb, out_np = make_points(*args), make_points_numpy(*args)
     for a, b in zip(out_nb, out_np, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-6)
     pts, vals, vrs, idx = out_nb
@@ -164,8 +173,8 @@ def _eval_args(pair: Pair, lvl: int, T: np.ndarray, copies: int = 1, affine_sums
     rl, fl = ref.level(lvl), ff.levels[lvl]
     c = fl.camera
     flags = np.ones(fl.width * fl.height, bool)
-    buf = np.zeros((rl.n_points, K.BUF_COLS))
-    prm = K.eval_params(c.fx, c.fy, c.cx, c.cy, 1.1, -3.0, 1.0, 16.0, 1.5, 1600.0, 0.25, 5.0)
+    buf = np.zeros((rl.n_points, BUF_COLS))
+    prm = eval_params(c.fx, c.fy, c.cx, c.cy, 1.1, -3.0, 1.0, 16.0, 1.5, 1600.0, 0.25, 5.0)
     nch = rl.values.shape[1]
     packed = fl.packed if (affine_sums or nch == 1) else np.zeros((1, 1, 3, nch), np.float32)  # placeholder
     args = [rl.points, rl.values, rl.variances, rl.pixel_index, fl.feat, packed, T, prm, affine_sums, flags, True, buf]
@@ -184,9 +193,9 @@ def test_eval_pass_numba_equals_numpy(copies: int, affine_sums: bool) -> None:
     args3 = list(args)
     args3[-3] = args[-3].copy()
     args3[-1] = args[-1].copy()
-    out_nb = K.eval_pass(*args)
-    out_np = K.eval_pass_numpy(*args2)
-    out_par = K.eval_pass_parallel(*args3)
+    out_nb = eval_pass(*args)
+    out_np = eval_pass_numpy(*args2)
+    out_par = eval_pass_parallel(*args3)
     n_in = out_nb[0]
     assert 0 < n_in < rl.n_points  # the shifted pose pushes some points out of the image
     assert out_nb[0] == out_np[0] and out_nb[2] == out_np[2] and out_nb[3] == out_np[3]
@@ -202,10 +211,10 @@ def test_eval_pass_numba_equals_numpy(copies: int, affine_sums: bool) -> None:
     # the parallel kernel is bit-identical to the serial one
     assert out_par == out_nb
     assert args3[-1].tobytes() == args[-1].tobytes() and args3[-3].tobytes() == args[-3].tobytes()
-    A, b = K.warp_update(args[-1])
-    Ap, bp = K.warp_update_parallel(args[-1])
+    A, b = warp_update(args[-1])
+    Ap, bp = warp_update_parallel(args[-1])
     assert A.tobytes() == Ap.tobytes() and b.tobytes() == bp.tobytes()
-    An, bn = K.warp_update_numpy(args2[-1])
+    An, bn = warp_update_numpy(args2[-1])
     np.testing.assert_allclose(A, An, rtol=rtol, atol=rtol * np.abs(An).max() if fast else 0)
     np.testing.assert_allclose(b, bn, rtol=rtol, atol=rtol * np.abs(bn).max())
 
@@ -218,15 +227,15 @@ def test_warp_update_numba_equals_numpy_and_explicit_jacobian() -> None:
     G = rng.normal(size=(n, nch, 2)) * 50  # fx·∂F/∂x, fy·∂F/∂y per channel
     W = rng.uniform(0.01, 1, (n, nch))
     r = rng.normal(size=(n, nch)) * 5
-    buf = np.zeros((n, K.BUF_COLS))
+    buf = np.zeros((n, BUF_COLS))
     buf[:, :3] = X
     buf[:, 3] = np.sum(W * G[..., 0] ** 2, 1)
     buf[:, 4] = np.sum(W * G[..., 0] * G[..., 1], 1)
     buf[:, 5] = np.sum(W * G[..., 1] ** 2, 1)
     buf[:, 6] = np.sum(W * r * G[..., 0], 1)
     buf[:, 7] = np.sum(W * r * G[..., 1], 1)
-    A_nb, b_nb = K.warp_update(buf)
-    A_np, b_np = K.warp_update_numpy(buf)
+    A_nb, b_nb = warp_update(buf)
+    A_np, b_np = warp_update_numpy(buf)
     np.testing.assert_allclose(A_nb, A_np, rtol=1e-10)
     np.testing.assert_allclose(b_nb, b_np, rtol=1e-10, atol=1e-9)
     # explicit (N·n)×6 Jacobian with M from finite differences of the normalised projection
@@ -255,15 +264,15 @@ def test_solve_damped_and_se3_exp() -> None:
     A = B @ B.T + 0.1 * np.eye(6)
     b = rng.normal(size=6)
     for lam in (0.0, 0.2, 3.0):
-        x, ok = K.solve_damped(A, b, lam)
+        x, ok = solve_damped(A, b, lam)
         Ad = A.copy()
         Ad[np.diag_indices(6)] *= 1 + lam
         assert ok
         np.testing.assert_allclose(x, np.linalg.solve(Ad, b), rtol=1e-9)
-    x, ok = K.solve_damped(np.zeros((6, 6)), b, 0.0)
+    x, ok = solve_damped(np.zeros((6, 6)), b, 0.0)
     assert not ok and not x.any()
     for xi in (np.zeros(6), 1e-7 * rng.normal(size=6), rng.normal(size=6), np.r_[0.1, 0.2, 0.3, 0, 0, 1e-6]):
-        np.testing.assert_allclose(K.se3_exp(xi), SE3.exp(xi).matrix(), atol=1e-12)
+        np.testing.assert_allclose(se3_exp(xi), SE3.exp(xi).matrix(), atol=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------- tracking

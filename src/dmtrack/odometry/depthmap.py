@@ -55,7 +55,23 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dmtrack.errors import InputError
-from dmtrack.odometry import _depth_kernels as dk
+from dmtrack.odometry._depth_common import (
+    COUNT_NAMES,
+    GOOD_LEVEL,
+    P_REG_DIST_VAR,
+    PCOUNT_NAMES,
+    empty_state,
+    make_params,
+    stereo_geometry,
+)
+from dmtrack.odometry._depth_propagate import propagate_numba, propagate_reference
+from dmtrack.odometry._depth_regularize import (
+    fill_holes_numba,
+    fill_holes_reference,
+    regularize_numba,
+    regularize_reference,
+)
+from dmtrack.odometry._depth_update import observe_numba, observe_reference
 from dmtrack.odometry.config import ChannelRule, DepthConfig
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -122,10 +138,10 @@ class DepthMap:
         self.channel_cost = channel_cost
         self.info_channels = info_channels
         self.energy_channels = energy_channels
-        self._prm = dk.make_params(self.config)
+        self._prm = make_params(self.config)
         self._prm_by_n: dict[int, np.ndarray] = {}
         self.keyframe: Frame | None = None
-        self._set_state(dk.empty_state((0, 0)))
+        self._set_state(empty_state((0, 0)))
         self.n_updates = 0
         self.scale_from_parent = 1.0
         self.T_new_old: np.ndarray | None = None
@@ -206,7 +222,7 @@ class DepthMap:
         n = frame.n_channels
         prm = self._prm_by_n.get(n)
         if prm is None:
-            prm = self._prm_by_n[n] = dk.make_params(self.config, self.channel_rule(frame).info)
+            prm = self._prm_by_n[n] = make_params(self.config, self.channel_rule(frame).info)
         return prm
 
     def _require(self) -> Frame:
@@ -229,7 +245,7 @@ class DepthMap:
         mg = keyframe.levels[0].max_grad
         mask = np.zeros((h, w), bool)
         mask[1 : h - 1, 1 : w - 1] = mg[1 : h - 1, 1 : w - 1] > self.config.min_use_grad
-        state = dk.empty_state((h, w))
+        state = empty_state((h, w))
         valid, _bl, _nx, validity, idepth, var, idepth_s, var_s = state
         d = (0.5 + r).astype(np.float32)
         valid[mask] = True
@@ -262,7 +278,7 @@ class DepthMap:
         if d.shape != (h, w):
             raise InputError(f"idepth has shape {d.shape}, keyframe is {(h, w)}")
         mask = np.isfinite(d) & (d > 0)
-        state = dk.empty_state((h, w))
+        state = empty_state((h, w))
         valid, _bl, _nx, val, dep, v, dep_s, v_s = state
         valid[mask] = True
         dep[mask] = d[mask]
@@ -305,7 +321,7 @@ class DepthMap:
         self._check_frame(frame)
         lv = kf.levels[0]
         cam = lv.camera
-        geo = dk.stereo_geometry(
+        geo = stereo_geometry(
             float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), T_fk, initial_tracked_residual
         )
         good = self._check_good(ref_pixel_was_good)
@@ -326,29 +342,29 @@ class DepthMap:
             skip_ratio,
         )
         if self.use_numba:
-            counts = dk.observe_numba(*args, parallel=self.parallel)
+            counts = observe_numba(*args, parallel=self.parallel)
         else:
-            counts = dk.observe_reference(*args)
-        return {name: int(c) for name, c in zip(dk.COUNT_NAMES, counts, strict=True)}
+            counts = observe_reference(*args)
+        return {name: int(c) for name, c in zip(COUNT_NAMES, counts, strict=True)}
 
     def regularize(self, remove_occlusions: bool, validity_th: float | None = None) -> None:
         """regularizeDepthMap (radius 2) in place; ``validity_th`` defaults to ``val_sum_min_for_keep`` (24)."""
         self._require()
         th = self.config.val_sum_min_for_keep if validity_th is None else float(validity_th)
-        rdv = float(self._prm[dk.P_REG_DIST_VAR])
+        rdv = float(self._prm[P_REG_DIST_VAR])
         if self.use_numba:
-            dk.regularize_numba(self.state, remove_occlusions, th, rdv, self._scratch_bool, self.parallel)
+            regularize_numba(self.state, remove_occlusions, th, rdv, self._scratch_bool, self.parallel)
         else:
-            dk.regularize_reference(self.state, remove_occlusions, th, rdv)
+            regularize_reference(self.state, remove_occlusions, th, rdv)
 
     def fill_holes(self) -> None:
         """regularizeDepthMapFillHoles in place (reads a copy: no cascading)."""
         kf = self._require()
         mg = kf.levels[0].max_grad
         if self.use_numba:
-            dk.fill_holes_numba(self.state, mg, self._prm, self._scratch_bool, self._scratch_int, self.parallel)
+            fill_holes_numba(self.state, mg, self._prm, self._scratch_bool, self._scratch_int, self.parallel)
         else:
-            dk.fill_holes_reference(self.state, mg, self._prm)
+            fill_holes_reference(self.state, mg, self._prm)
 
     def update(
         self,
@@ -443,9 +459,9 @@ class DepthMap:
             self._cscale(old_kf),
         )
         if self.use_numba:
-            new_state, pcounts = dk.propagate_numba(*args)
+            new_state, pcounts = propagate_numba(*args)
         else:
-            new_state, pcounts = dk.propagate_reference(*args)
+            new_state, pcounts = propagate_reference(*args)
         t2 = time.perf_counter()
         child = self._sibling()
         child.keyframe = new_keyframe
@@ -457,7 +473,7 @@ class DepthMap:
         t3 = time.perf_counter()
         child.scale_from_parent = child._normalize_scale()
         child.T_new_old = np.array(T_new_old, np.float64)
-        child.last_counts = {name: int(c) for name, c in zip(dk.PCOUNT_NAMES, pcounts, strict=True)}
+        child.last_counts = {name: int(c) for name, c in zip(PCOUNT_NAMES, pcounts, strict=True)}
         t4 = time.perf_counter()
         child.timings_ms = {
             "finalize": 1e3 * (t1 - t0),
@@ -532,7 +548,7 @@ class DepthMap:
             return None
         h, w = self.shape
         g = np.ascontiguousarray(good, dtype=np.bool_)
-        need = (h >> dk.GOOD_LEVEL, w >> dk.GOOD_LEVEL)
+        need = (h >> GOOD_LEVEL, w >> GOOD_LEVEL)
         if g.shape != need:
             raise InputError(f"ref_pixel_was_good has shape {g.shape}, expected {need}")
         return g

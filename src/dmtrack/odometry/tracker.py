@@ -8,7 +8,7 @@ A faithful port of LSD-SLAM's ``SE3Tracker::trackFrame`` generalised to N-channe
   channel, error E = Σ W r² / #in-image points, ÷N too unless ``channel_cost="sum"`` (the error, and with it
   ``initialTrackedResidual``, is a per-channel mean; the step itself does not depend on that factor);
 * the 6×6 normal equations are accumulated on the fly through per-point 2×2 sums (see
-  :mod:`dmtrack.odometry._tracker_kernels`);
+  :mod:`dmtrack.odometry._tracker_residuals` and :mod:`dmtrack.odometry._tracker_normal_equations`);
 * LM schedule: accept if E decreases (stop the level when E_new/E_last > ``convergence_eps``; λ ← 0 if
   λ ≤ 0.2 else λ·``lambda_success_fac``); reject: stop when δ·δ ≤ ``step_size_min``, else λ ← 0.2 if λ = 0
   else λ·``lambda_fail_fac``^tries; update T ← exp(δ)·T;
@@ -34,7 +34,22 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
-from dmtrack.odometry import _tracker_kernels as K
+from dmtrack.odometry._tracker_normal_equations import (
+    se3_exp,
+    solve_damped,
+    warp_update,
+    warp_update_numpy,
+    warp_update_parallel,
+)
+from dmtrack.odometry._tracker_points import idepth_downsample, idepth_downsample_numpy, make_points, make_points_numpy
+from dmtrack.odometry._tracker_residuals import (
+    BLOCK,
+    BUF_COLS,
+    eval_params,
+    eval_pass,
+    eval_pass_numpy,
+    eval_pass_parallel,
+)
 from dmtrack.odometry.config import ChannelRule, TrackerConfig
 from dmtrack.odometry.frame import Frame
 
@@ -126,7 +141,7 @@ class TrackingReference:
             raise InputError(
                 f"inverse depth {idepth.shape} / variance {idepth_var.shape} do not match the keyframe {shape}"
             )
-        down = K.idepth_downsample if use_numba else K.idepth_downsample_numpy
+        down = idepth_downsample if use_numba else idepth_downsample_numpy
         pyr = [(idepth, idepth_var)]
         for _ in range(1, len(keyframe.levels)):
             pyr.append(down(*pyr[-1]))
@@ -142,7 +157,7 @@ class TrackingReference:
             d, v = self.idepth_pyramid[lvl]
             kl = self.keyframe.levels[lvl]
             cam = kl.camera
-            mk = K.make_points if self._use_numba else K.make_points_numpy
+            mk = make_points if self._use_numba else make_points_numpy
             fx, fy, cx, cy = float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
             pts, vals, vrs, idx = mk(d, v, kl.feat, fx, fy, cx, cy)
             rl = ReferenceLevel(lvl, pts, vals, vrs, idx, kl.width, kl.height)
@@ -247,7 +262,7 @@ class Tracker:
         config: TrackerConfig | None = None,
         use_numba: bool = True,
         parallel: bool = False,
-        parallel_min_points: int = 4 * K.BLOCK,
+        parallel_min_points: int = 4 * BLOCK,
         channel_cost: str = "balanced",
         energy_channels: float | None = None,
     ):
@@ -261,14 +276,14 @@ class Tracker:
         self._eval_fn: Any
         self._update_fn: Any
         if not use_numba:
-            self._eval_fn, self._update_fn = K.eval_pass_numpy, K.warp_update_numpy
+            self._eval_fn, self._update_fn = eval_pass_numpy, warp_update_numpy
         else:
-            self._eval_fn, self._update_fn = K.eval_pass, K.warp_update
+            self._eval_fn, self._update_fn = eval_pass, warp_update
 
     def _kernels(self, n_points: int) -> tuple[Any, Any]:
         """(evaluation, normal-equation) functions for a level with ``n_points`` reference points."""
         if self.use_numba and self.parallel and n_points >= self.parallel_min_points:
-            return K.eval_pass_parallel, K.warp_update_parallel
+            return eval_pass_parallel, warp_update_parallel
         return self._eval_fn, self._update_fn
 
     # ------------------------------------------------------------------ one evaluation
@@ -288,7 +303,7 @@ class Tracker:
     ) -> _Eval:
         cfg = self.config
         cam = frame_level.camera
-        prm = K.eval_params(
+        prm = eval_params(
             cam.fx,
             cam.fy,
             cam.cx,
@@ -331,7 +346,7 @@ class Tracker:
         return _Eval(int(n_in), float(error), int(good), int(bad), float(usage), a_new, b_new, buf)
 
     def _solve(self, A: np.ndarray, bvec: np.ndarray, lam: float) -> np.ndarray:
-        x, ok = K.solve_damped(A, bvec, lam)
+        x, ok = solve_damped(A, bvec, lam)
         return x if ok else np.zeros(6)
 
     # ------------------------------------------------------------------ public
@@ -405,7 +420,7 @@ class Tracker:
             fl = frame.levels[lvl]
             write = lvl == min_level
             thr = cfg.min_inlier_fraction * fl.width * fl.height
-            bufs = [np.empty((rl.n_points, K.BUF_COLS)), np.empty((rl.n_points, K.BUF_COLS))]
+            bufs = [np.empty((rl.n_points, BUF_COLS)), np.empty((rl.n_points, BUF_COLS))]
             eval_fn, update_fn = self._kernels(rl.n_points)
             cur = 0
             ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale, eval_fn, good_fac)
@@ -429,7 +444,7 @@ class Tracker:
                 while True:
                     inc = self._solve(A, bvec, lam)
                     inc_try += 1
-                    T_new = K.se3_exp(inc) @ T
+                    T_new = se3_exp(inc) @ T
                     trial = self._evaluate(
                         rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale, eval_fn, good_fac
                     )

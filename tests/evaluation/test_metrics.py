@@ -239,7 +239,7 @@ def test_standard_rpe_equals_evo(shared_dir, delta, unit, relation, all_pairs, f
 
     d = shared_dir / "data" / "trajectories"
     gt, est = read_tum(d / "freiburg1_xyz-groundtruth.txt"), read_tum(d / "freiburg1_xyz-rgbdslam.txt")
-    from dmtrack.evaluation import associate_trajectories
+    from dmtrack.io.association import associate_trajectories
 
     gt, est = associate_trajectories(gt, est, 0.01)
     ours = rpe(gt, est, delta, unit, relation, all_pairs=all_pairs, pairs_from_reference=from_ref)

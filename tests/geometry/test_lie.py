@@ -24,7 +24,7 @@ from dmtrack.geometry import (
     so3_log,
     vee,
 )
-from dmtrack.geometry.lie import _se3_v_coeffs, _se3_vinv_coeff, _sim3_w_coeffs
+from dmtrack.geometry.lie._coeffs import _se3_v_coeffs, _se3_vinv_coeff, _sim3_w_coeffs
 
 SETTINGS = settings(max_examples=100, deadline=None)
 EPS_PI = 1e-3  # log∘exp is only an identity for angles below π (the log returns angles in [0, π])

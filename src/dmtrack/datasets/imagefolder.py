@@ -26,7 +26,7 @@ import numpy as np
 from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_file
 from dmtrack.errors import DatasetError, InputError
-from dmtrack.evaluation.association import associate
+from dmtrack.io.association import associate
 from dmtrack.io.images import read_image
 from dmtrack.io.trajectory import read_times, read_tum
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.evaluation.alignment import AlignMode, align_trajectory
-from dmtrack.evaluation.association import associate_trajectories
+from dmtrack.io.association import associate_trajectories
 from dmtrack.io.trajectory import Trajectory
 
 UNDEFINED_ANGLE_DEG = 90.0

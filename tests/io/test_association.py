@@ -1,4 +1,4 @@
-"""Tests of dmtrack.evaluation.association (greedy one-to-one timestamp matching)."""
+"""Tests of dmtrack.io.association (greedy one-to-one timestamp matching)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dmtrack.evaluation import associate, associate_trajectories
+from dmtrack.io.association import associate, associate_trajectories
 from dmtrack.io.trajectory import Trajectory, read_kitti, read_tum
 
 

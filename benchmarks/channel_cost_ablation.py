@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     a = ap.parse_args(argv)
-    from dmtrack.experiments.runner import parse_seeds
+    from dmtrack.io.bench_layout import parse_seeds
 
     seeds = parse_seeds(a.seeds)
     variants = dict(DEFAULT_VARIANTS)

@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
     ap.add_argument("--name", default=None)
     a = ap.parse_args(argv)
-    from dmtrack.experiments.runner import parse_seeds
+    from dmtrack.io.bench_layout import parse_seeds
 
     seeds = parse_seeds(a.seeds)
     jobs = [(a.sequence, a.feature, tuple(a.set), s, a.max_frames, _fraction(a.r_l), a.intrinsics) for s in seeds]

@@ -15,7 +15,8 @@ import pytest
 
 from dmtrack.errors import InputError
 from dmtrack.evaluation import evaluate
-from dmtrack.evaluation.report import RESULT_COLUMNS, collect_runs, results_rows, write_report
+from dmtrack.evaluation.records import RESULT_COLUMNS, collect_runs, results_rows
+from dmtrack.evaluation.report import write_report
 from dmtrack.experiments.cli import add_report_parser
 from dmtrack.io.trajectory import Trajectory, write_tum
 from dmtrack.viz.plots import topview_basis

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from dmtrack.errors import InputError
-from dmtrack.experiments.runner import plan_grid, run_bench
+from dmtrack.experiments.bench import run_bench
+from dmtrack.experiments.grid import plan_grid
 
 distributed = pytest.importorskip(
     "distributed", reason='dask.distributed is not installed (optional extra: pip install "dmtrack[cluster]")'

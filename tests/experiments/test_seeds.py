@@ -1,7 +1,8 @@
 """Multi-seed benches (``dmtrack bench --seeds``): seed lists, layout, resuming per seed, the report's medians.
 
 One real bench (synthetic sequence × gray, gray-affine × seeds 0-2, few frames) runs once per module in 2
-spawned worker processes; the other tests work on copies of its folder or on hand-written spec files.
+spawned worker processes; the other tests work on copies of its folder (``bench_copy``) or on hand-written
+spec files.
 """
 
 from __future__ import annotations
@@ -9,22 +10,17 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import shutil
 import statistics
 from pathlib import Path
 
 import pytest
 
 from dmtrack.errors import InputError
+from dmtrack.experiments.bench import run_bench
 from dmtrack.experiments.cli import add_bench_parser
-from dmtrack.experiments.runner import (
-    _commit,
-    format_seeds,
-    parse_seeds,
-    plan_grid,
-    run_bench,
-    run_state,
-)
+from dmtrack.experiments.grid import plan_grid
+from dmtrack.experiments.store import commit, run_state
+from dmtrack.io.bench_layout import format_seeds, parse_seeds
 
 SYN = "synthetic:n_frames=25,width=320,height=240,seed=1,texel=0.02"
 FEATURES = ["gray", "gray-affine"]
@@ -41,16 +37,6 @@ def grid(tmp_path_factory: pytest.TempPathFactory):
     result = run_bench([SYN], FEATURES, out, seeds="0-2", jobs=2, max_frames=N, progress=False,
                        pointcloud=False)  # fmt: skip
     return out, result
-
-
-def copy_of(grid, tmp_path: Path) -> Path:
-    dst = tmp_path / "copy"
-    shutil.copytree(grid[0], dst)
-    return dst
-
-
-def mtimes(root: Path) -> dict[str, int]:
-    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in sorted((root / "runs").rglob("*.json"))}
 
 
 def read_csv(path: Path) -> list[dict[str, str]]:
@@ -127,7 +113,7 @@ def test_replacing_a_single_seed_run_keeps_the_seed_folders(tmp_path: Path):
     tmp = tmp_path / "runs" / "s" / ".gray.tmp-x"
     tmp.mkdir()
     (tmp / "metrics.json").write_text('{"new": true}')
-    _commit(tmp, final)
+    commit(tmp, final)
     assert not tmp.exists() and not (final / "old.txt").exists()
     assert json.loads((final / "metrics.json").read_text()) == {"new": True}
     assert (final / "seed-0" / "metrics.json").read_text() == "{}"
@@ -207,8 +193,8 @@ def test_tables_give_median_and_range_of_the_seeds(grid):
 
 
 # ---------------------------------------------------------------------------------------------- resuming
-def test_second_invocation_recomputes_nothing(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_second_invocation_recomputes_nothing(bench_copy: Path, mtimes):
+    out = bench_copy
     before = mtimes(out)
     res = run_bench([SYN], FEATURES, out, seeds=[0, 1, 2], jobs=2, max_frames=N, progress=False,
                     pointcloud=False, report=False)  # fmt: skip
@@ -216,8 +202,8 @@ def test_second_invocation_recomputes_nothing(grid, tmp_path: Path):
     assert mtimes(out) == before
 
 
-def test_killed_multi_seed_bench_resumes_per_seed(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_killed_multi_seed_bench_resumes_per_seed(grid, bench_copy: Path, mtimes):
+    out = bench_copy
     gray = out / "runs" / SEQ / "gray"
     (gray / "seed-1" / "metrics.json").unlink()  # killed before seed 1 finished
     stale = gray / ".seed-2.tmp-host-123-deadbeef"  # and while seed 2 was being rewritten
@@ -249,8 +235,8 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def test_cli_bench_seeds_resumes(grid, tmp_path: Path, capsys: pytest.CaptureFixture[str]):
-    out = copy_of(grid, tmp_path)
+def test_cli_bench_seeds_resumes(bench_copy: Path, capsys: pytest.CaptureFixture[str]):
+    out = bench_copy
     args = parser().parse_args(["bench", "--sequences", SYN, "--features", "gray,gray-affine", "--out", str(out),
                                 "--max-frames", str(N), "--seeds", "0,1-2", "--no-pointcloud",
                                 "--no-figures"])  # fmt: skip

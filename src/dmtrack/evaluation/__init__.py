@@ -11,7 +11,6 @@ from dmtrack.evaluation.alignment import (
     sim3_matrix,
     umeyama,
 )
-from dmtrack.evaluation.association import associate, associate_trajectories
 from dmtrack.evaluation.metrics import (
     UNDEFINED_ANGLE_DEG,
     AteResult,
@@ -35,8 +34,6 @@ __all__ = [
     "UNDEFINED_ANGLE_DEG",
     "align_trajectory",
     "apply_sim3",
-    "associate",
-    "associate_trajectories",
     "ate",
     "evaluate",
     "rpe",

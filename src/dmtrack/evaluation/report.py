@@ -4,9 +4,10 @@
 several seeds, ``DIR/runs/<sequence>/<feature>/seed-<S>/`` (those with a ``metrics.json``, or an
 ``error.json`` for a crashed run; unfinished folders are ignored) and writes
 
-* ``results.csv`` — one row per run (:data:`RESULT_COLUMNS`; ``seed`` says which seed);
+* ``results.csv`` — one row per run (:data:`~dmtrack.evaluation.records.RESULT_COLUMNS`; ``seed`` says which seed);
 * ``tables/cells.csv`` — one row per (sequence, feature) cell: the median, min, max and n over the seeds of
-  every metric, the seeds, how many lost tracking or failed and the worst seed (:data:`CELL_COLUMNS`);
+  every metric, the seeds, how many lost tracking or failed and the worst seed
+  (:data:`~dmtrack.evaluation.tables.CELL_COLUMNS`);
 * ``tables/rankings.csv`` (Tables 2–5), ``tables/ranks_per_sequence.csv``, ``tables/averages.csv``
   (Table 6), ``tables/timings.csv`` (Table 7) — one block of rows per dataset, computed on the per-cell
   medians (:func:`dmtrack.evaluation.rankings.aggregate_seeds`; with one seed, the runs' values), with the
@@ -19,19 +20,18 @@ several seeds, ``DIR/runs/<sequence>/<feature>/seed-<S>/`` (those with a ``metri
   the run of the seed with the median RPE rotation error.
 
 Sequences are grouped into datasets (one ranking table each) by the ``dataset`` given in the sequences
-file, else by format and name (:func:`dmtrack.experiments.runner.dataset_label`).  Rankings, averages and
+file, else by format and name (:func:`dmtrack.io.bench_layout.dataset_label`).  Rankings, averages and
 timings are computed by :mod:`dmtrack.evaluation.rankings` (missing values are explained there).
+
+The runs are read by :mod:`dmtrack.evaluation.records`, the CSV files and markdown tables made by
+:mod:`dmtrack.evaluation.tables`; this module draws the figures and writes ``report.md``.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import math
 import re
 import warnings
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -41,9 +41,6 @@ import numpy as np
 from dmtrack import __version__
 from dmtrack.evaluation.rankings import (
     CRITERIA,
-    SEED_METRICS,
-    FeatureAverages,
-    FeatureRanking,
     aggregate_seeds,
     group_rows,
     median_range,
@@ -52,243 +49,43 @@ from dmtrack.evaluation.rankings import (
     ranking_table,
     sequence_ranks,
     timing_table,
-    tracked_fraction,
     value_of,
+)
+from dmtrack.evaluation.records import RESULT_COLUMNS, RunRecord, collect_runs, feature_order, results_rows
+from dmtrack.evaluation.tables import (
+    AVERAGE_COLUMNS,
+    CELL_COLUMNS,
+    RANKING_COLUMNS,
+    RANKS_PER_SEQUENCE_COLUMNS,
+    TIMING_COLUMNS,
+    averages_md,
+    best_text,
+    cell_csv_rows,
+    cell_status,
+    cell_value,
+    dataclass_rows,
+    fmt_value,
+    md_table,
+    plural,
+    ranking_csv_rows,
+    ranking_md,
+    write_csv,
+)
+from dmtrack.io.atomic import write_text
+from dmtrack.io.bench_layout import (
+    BENCH_JSON,
+    GROUNDTRUTH_TXT,
+    TRAJECTORY_TXT,
+    format_seeds,
+    read_json,
 )
 
 #: Name prefixes of the figures the report writes (older ones are deleted when it is rebuilt).
 FIGURE_PREFIXES = ("rpe_", "trajectory_", "depth_", "accuracy_vs_time_")
 
-#: Columns of ``results.csv`` (one row per run).
-RESULT_COLUMNS = (
-    "dataset", "sequence", "feature", "status", "total_frames", "processed_frames", "tracked_frames",
-    "tracked_fraction", "lost_at", "lost_reason", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse",
-    "ate_scale", "matched_poses", "gt_path_length", "r_l", "fps", "feature_ms", "io_ms", "tracking_ms",
-    "mapping_ms", "total_ms", "wall_s", "keyframes", "points", "channels", "width", "height", "start", "seed",
-    "error", "host", "run_dir",
-)  # fmt: skip
-
-
-# =================================================================================================== runs
-@dataclass
-class RunRecord:
-    """One finished run of a bench folder.
-
-    Attributes
-    ----------
-    sequence, feature : names (the run folder is ``runs/<sequence>/<feature>``, or
-        ``runs/<sequence>/<feature>/seed-<S>`` in a bench with several seeds).
-    path : the run folder.
-    spec, metrics, error, evaluation, info : the contents of ``spec.json``, ``metrics.json``,
-        ``error.json``, ``evaluation.json`` and ``run_info.json`` (``None`` / ``{}`` where absent).
-    dataset : the dataset group.
-    unit : the ground truth's length unit (per-metre values are per this unit).
-    seed : the seed of the random depth initialisation the run used (``None`` if not recorded).
-    key : the run folder relative to ``runs/`` (``"<sequence>/<feature>[/seed-<S>]"``).
-    """
-
-    sequence: str
-    feature: str
-    path: Path
-    spec: dict[str, Any]
-    metrics: dict[str, Any] | None
-    error: dict[str, Any] | None
-    evaluation: dict[str, Any] | None
-    info: dict[str, Any]
-    dataset: str
-    unit: str = "m"
-    seed: int | None = None
-    key: str = ""
-
-    def __post_init__(self) -> None:
-        if not self.key:
-            self.key = f"{self.sequence}/{self.path.name}"
-
-    @property
-    def status(self) -> str:
-        """``"ok"`` (tracked to the end), ``"lost"`` (tracking lost) or ``"failed"`` (crashed)."""
-        if self.metrics is None:
-            return "failed"
-        return "lost" if self.metrics.get("lost_at") is not None else "ok"
-
-
-def _read_json(path: Path) -> Any:
-    from dmtrack.experiments.runner import read_json
-
-    return read_json(path)
-
-
-def _run_seed(spec: dict[str, Any], metrics: dict[str, Any] | None) -> int | None:
-    """The seed a run used: its spec's, else the one its metrics.json records, else its configuration's."""
-    from dmtrack.experiments.runner import effective_seed
-
-    for v in (spec.get("seed"), (metrics or {}).get("seed"), effective_seed(spec) if spec else None):
-        if v is not None and not isinstance(v, bool):
-            try:
-                return int(v)
-            except (TypeError, ValueError):
-                continue
-    return None
-
-
-def collect_runs(bench_dir: str | Path) -> list[RunRecord]:
-    """The finished runs of a bench folder, in the bench's sequence and feature order, then by seed.
-
-    A run folder (``runs/<sequence>/<feature>/`` or, with several seeds, ``runs/<sequence>/<feature>/seed-<S>/``)
-    counts when it holds a readable ``metrics.json`` (finished, possibly with a tracking loss) or
-    ``error.json`` (crashed); hidden (temporary) folders and unfinished runs are ignored.  A feature folder
-    that holds both a run and ``seed-<S>/`` runs (benched with one seed and with several) gives the runs of
-    the last bench's grid (``bench.json``): the single run if that grid lists it, else the seeds' runs.
-    """
-    from dmtrack.experiments.runner import SEED_DIR, dataset_label, length_unit
-
-    root = Path(bench_dir)
-    bench = _read_json(root / "bench.json") or {}
-    datasets = {s.get("name"): s.get("dataset") for s in bench.get("sequences", []) if isinstance(s, dict)}
-    units = {s.get("name"): s.get("unit") for s in bench.get("sequences", []) if isinstance(s, dict)}
-    seq_order = [s.get("name") for s in bench.get("sequences", []) if isinstance(s, dict)]
-    feat_order = list(bench.get("features", []))
-    planned = set(bench.get("runs") or [])
-    records = []
-    runs = root / "runs"
-    if not runs.is_dir():
-        return []
-
-    def load(seq_dir: Path, run_dir: Path, key: str) -> RunRecord | None:
-        metrics = _read_json(run_dir / "metrics.json")
-        error = _read_json(run_dir / "error.json") if metrics is None else None
-        if not isinstance(metrics, dict) and not isinstance(error, dict):
-            return None
-        spec = _read_json(run_dir / "spec.json") or {}
-        spec = spec if isinstance(spec, dict) else {}
-        info = _read_json(run_dir / "run_info.json") or {}
-        evaluation = _read_json(run_dir / "evaluation.json")
-        m = metrics if isinstance(metrics, dict) else {}
-        feature = str(spec.get("feature") or m.get("feature") or key.split("/")[1])
-        fmt, name = m.get("format") or spec.get("format"), m.get("sequence") or seq_dir.name
-        dataset = datasets.get(seq_dir.name) or info.get("dataset") or dataset_label(fmt, name)
-        unit = units.get(seq_dir.name) or info.get("unit") or length_unit(fmt, name)
-        return RunRecord(seq_dir.name, feature, run_dir, spec, metrics if isinstance(metrics, dict) else None,
-                         error if isinstance(error, dict) else None,
-                         evaluation if isinstance(evaluation, dict) else None, info, str(dataset), str(unit),
-                         _run_seed(spec, m), key)  # fmt: skip
-
-    for seq_dir in sorted(runs.iterdir()):
-        if not seq_dir.is_dir() or seq_dir.name.startswith("."):
-            continue
-        for feat_dir in sorted(seq_dir.iterdir()):
-            if not feat_dir.is_dir() or feat_dir.name.startswith("."):
-                continue
-            key = f"{seq_dir.name}/{feat_dir.name}"
-            single = load(seq_dir, feat_dir, key)
-            seeded = [
-                rec
-                for d in sorted(feat_dir.iterdir())
-                if d.is_dir() and SEED_DIR.match(d.name)
-                for rec in [load(seq_dir, d, f"{key}/{d.name}")]
-                if rec is not None
-            ]
-            if single is not None and seeded:
-                if key in planned:
-                    seeded = []
-                else:
-                    single = None
-            records += ([single] if single is not None else []) + seeded
-
-    def order(name: str, known: list[str]) -> tuple[int, str]:
-        return (known.index(name), "") if name in known else (len(known), name)
-
-    records.sort(key=lambda r: (order(r.sequence, seq_order), order(r.feature, feat_order),
-                                (0, r.seed) if r.seed is not None else (1, 0), r.key))  # fmt: skip
-    return records
-
-
-def feature_order(records: Sequence[RunRecord], bench_dir: str | Path | None = None) -> list[str]:
-    """Features in the bench's order (``bench.json``), then any others in order of appearance."""
-    known: list[str] = []
-    if bench_dir is not None:
-        known = list((_read_json(Path(bench_dir) / "bench.json") or {}).get("features", []))
-    present = ordered_unique(r.feature for r in records)
-    return [f for f in known if f in present] + [f for f in present if f not in known]
-
-
-def results_rows(records: Iterable[RunRecord]) -> list[dict[str, Any]]:
-    """One flat row per run with the :data:`RESULT_COLUMNS` (missing values are ``None``)."""
-    rows = []
-    for r in records:
-        m = r.metrics or {}
-        ev = r.evaluation or {}
-        row: dict[str, Any] = {c: None for c in RESULT_COLUMNS}
-        row.update({k: m.get(k) for k in RESULT_COLUMNS if k in m})
-        row.update(dataset=r.dataset, sequence=r.sequence, feature=r.feature, status=r.status, seed=r.seed,
-                   run_dir=str(r.path), host=r.info.get("host"))  # fmt: skip
-        if r.metrics is None:
-            row["start"] = r.spec.get("start")
-            err = r.error or {}
-            row["error"] = f"{err.get('type', 'error')}: {err.get('message', '')}".strip()
-        else:
-            row["processed_frames"] = r.info.get("processed_frames")
-            row["tracked_fraction"] = tracked_fraction(m)
-            parts = [value_of(m, k) for k in ("feature_ms", "io_ms", "tracking_ms", "mapping_ms")]
-            row["total_ms"] = sum(p for p in parts if p is not None) if any(p is not None for p in parts) else None
-            row["gt_path_length"] = ev.get("gt_path_length")
-            if ev.get("error"):
-                row["error"] = f"evaluation: {ev['error']}"
-            elif m.get("evaluation_error"):
-                row["error"] = f"evaluation: {m['evaluation_error']}"
-        rows.append(row)
-    return rows
-
-
-# ================================================================================================ output
-def _csv_value(v: Any) -> Any:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return "" if not math.isfinite(v) else repr(v)
-    return v
-
-
-def write_csv(path: str | Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> Path:
-    """Write ``rows`` as CSV with ``columns`` (missing → empty cell); atomically."""
-    from dmtrack.io.trajectory import _atomic_write
-
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
-    for r in rows:
-        w.writerow([_csv_value(r.get(c)) for c in columns])
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write(p, buf.getvalue())
-    return p
-
-
-def _fmt(v: Any, digits: int = 2) -> str:
-    if v is None:
-        return "–"
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            return "–"
-        return f"{v:.{digits}f}"
-    return str(v)
-
-
-def _md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], align: str | None = None) -> str:
-    align = align or "l" + "r" * (len(headers) - 1)
-    marks = {"l": ":---", "r": "---:", "c": ":---:"}
-    lines = ["| " + " | ".join(headers) + " |", "| " + " | ".join(marks[a] for a in align) + " |"]
-    for r in rows:
-        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
-    return "\n".join(lines)
-
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_") or "x"
-
-
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}" + ("" if n == 1 else "s")
 
 
 # ================================================================================================ figures
@@ -305,8 +102,8 @@ def _range_text(values: Sequence[Any]) -> str:
     if n == 0:
         return "–"
     if n == 1:
-        return _fmt(med, 1)
-    return f"{_fmt(med, 1)}; {_fmt(lo, 1)}–{_fmt(hi, 1)}"
+        return fmt_value(med, 1)
+    return f"{fmt_value(med, 1)}; {fmt_value(lo, 1)}–{fmt_value(hi, 1)}"
 
 
 def _rpe_curves(records: Sequence[RunRecord]) -> list[Any]:
@@ -336,7 +133,7 @@ def _rpe_curves(records: Sequence[RunRecord]) -> list[Any]:
             warnings.simplefilter("ignore", RuntimeWarning)  # a length without any value stays NaN
             med = np.nanmedian(stack, axis=1)
             lo, hi = np.nanmin(stack, axis=1), np.nanmax(stack, axis=1)
-        label = f"{feature} [{tracked}] · {_plural(len(runs), 'seed')}"
+        label = f"{feature} [{tracked}] · {plural(len(runs), 'seed')}"
         curves.append(RpeCurve(label, med[0], med[1], med[2], lo[1], hi[1], lo[2], hi[2]))
     return curves
 
@@ -381,7 +178,7 @@ def _trajectory_inputs(
 ) -> tuple[np.ndarray | None, list[tuple[str, np.ndarray]]]:
     gt = None
     for r in records:
-        g = _read_positions(r.path / "groundtruth.txt")
+        g = _read_positions(r.path / GROUNDTRUTH_TXT)
         if g is not None and (gt is None or len(g) > len(gt)):
             gt = g
     estimates = []
@@ -389,7 +186,7 @@ def _trajectory_inputs(
         ev = r.evaluation or {}
         if r.metrics is None or "ate_alignment" not in ev:
             continue
-        p = _read_positions(r.path / "trajectory.txt")
+        p = _read_positions(r.path / TRAJECTORY_TXT)
         if p is None or len(p) == 0:
             continue
         A = np.asarray(ev["ate_alignment"], dtype=float)
@@ -439,94 +236,6 @@ def _depth_grid(
                 cells.append(DepthCell(None, ""))
         rows.append((feature, cells))
     return rows, [f"t = {t}" for t in targets]
-
-
-# ================================================================================================ tables
-def _ranking_csv_rows(
-    dataset: str, table: Sequence[FeatureRanking], seeds: dict[str, str] | None = None
-) -> list[dict[str, Any]]:
-    out = []
-    for fr in table:
-        row: dict[str, Any] = {"dataset": dataset, "feature": fr.feature, "seeds": (seeds or {}).get(fr.feature)}
-        for c in CRITERIA:
-            row[f"{c.key}_wins"] = fr.wins[c.key]
-            row[f"{c.key}_average_rank"] = fr.average_rank[c.key]
-            row[f"{c.key}_sequences"] = fr.sequences[c.key]
-        out.append(row)
-    return out
-
-
-RANKING_COLUMNS = (
-    ("dataset", "feature")
-    + tuple(f"{c.key}_{s}" for c in CRITERIA for s in ("wins", "average_rank", "sequences"))
-    + ("seeds",)
-)
-# ``runs`` in averages.csv / timings.csv counts cells (sequences): with several seeds, a cell is the median of
-# its seeds' runs.  ``seeds`` (last column of every table) lists the seeds the values are medians over.
-AVERAGE_COLUMNS = ("dataset", "feature", "runs", "tracked_fraction", "n_tracked", "tracked_frames", "rpe_rot",
-                   "n_rpe_rot", "rpe_trans", "n_rpe_trans", "ate", "n_ate", "common_rpe_rot", "common_rpe_trans",
-                   "n_common", "seeds")  # fmt: skip
-TIMING_COLUMNS = ("dataset", "feature", "runs", "frames", "feature_ms", "io_ms", "tracking_ms", "mapping_ms",
-                  "total_ms", "fps", "wall_fps", "seeds")  # fmt: skip
-RANKS_PER_SEQUENCE_COLUMNS = ("dataset", "sequence", "feature") + tuple(f"{c.key}_rank" for c in CRITERIA) + ("seeds",)
-#: Columns of ``tables/cells.csv``: one row per (sequence, feature) cell; per metric of
-#: :data:`~dmtrack.evaluation.rankings.SEED_METRICS` its median, min and max over the seeds and n (seeds with a
-#: value); ``worst_*`` describe the worst seed (a failed one, else the fewest tracked frames).
-CELL_COLUMNS = ("dataset", "sequence", "feature", "seeds", "runs", "n_ok", "n_lost", "n_failed", "total_frames",
-                "worst_seed", "worst_status", "worst_tracked_frames", "worst_lost_at") + tuple(
-    f"{m}_{s}" for m in SEED_METRICS for s in ("median", "min", "max", "n")
-)  # fmt: skip
-
-
-def _cell_csv_rows(cells: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    from dmtrack.experiments.runner import format_seeds
-
-    out = []
-    for c in cells:
-        row = {k: c.get(k) for k in CELL_COLUMNS if k in c}
-        row["seeds"] = format_seeds(c["seeds"])
-        for m in SEED_METRICS:
-            row[f"{m}_median"] = c.get(m)
-        out.append(row)
-    return out
-
-
-def _cell_value(c: dict[str, Any], key: str, digits: int, after: str = "") -> str:
-    """A cell's median of ``key`` (then ``after``), with several seeds followed by ``(min–max)`` and, when
-    only some seeds have a value, ``[k of n]``."""
-    med = c.get(key)
-    if med is None:
-        return "–"
-    text = _fmt(med, digits) + after
-    if c.get("runs", 1) > 1:
-        n = c.get(f"{key}_n", 0)
-        if n > 1:
-            text += f" ({_fmt(c[f'{key}_min'], digits)}–{_fmt(c[f'{key}_max'], digits)})"
-        if n < c["runs"]:
-            text += f" [{n} of {c['runs']}]"
-    return text
-
-
-def _cell_status(c: dict[str, Any]) -> str:
-    """``ok`` / ``lost @N`` / ``failed`` for one run; with several seeds the counts and the worst seed, e.g.
-    ``2 ok, 1 lost; worst: seed 2 lost @14, 14/25 tracked``."""
-    if c.get("runs", 1) <= 1:
-        return str(c["status"]) + (f" @{c['lost_at']}" if c.get("lost_at") is not None else "")
-    if c["n_ok"] == c["runs"]:
-        return f"ok ({c['runs']} of {c['runs']})"
-    counts = ", ".join(f"{c[f'n_{s}']} {s}" for s in ("ok", "lost", "failed") if c[f"n_{s}"])
-    if c["worst_status"] == "failed":
-        worst = f"seed {c['worst_seed']} failed"
-    else:
-        worst = (f"seed {c['worst_seed']} lost @{c['worst_lost_at']}, "
-                 f"{_fmt(c['worst_tracked_frames'])}/{_fmt(c['total_frames'])} tracked")  # fmt: skip
-    return f"{counts}; worst: {worst}"
-
-
-def _dc_rows(dataset: str, items: Sequence[Any], seeds: dict[str, str] | None = None) -> list[dict[str, Any]]:
-    from dataclasses import asdict
-
-    return [{"dataset": dataset, **asdict(x), "seeds": (seeds or {}).get(x.feature)} for x in items]
 
 
 def _common_sequences(cells: Sequence[dict[str, Any]], features: Sequence[str]) -> set[str]:
@@ -582,18 +291,6 @@ def _machine_text(records: Sequence[RunRecord], bench: dict[str, Any]) -> str:
     return text + "."
 
 
-def _best(table: Sequence[FeatureRanking], key: str) -> str:
-    counted = [fr for fr in table if fr.average_rank[key] is not None]
-    if not counted:
-        return "no values"
-    most = max(fr.wins[key] for fr in counted)
-    winners = [fr.feature for fr in counted if fr.wins[key] == most]
-    best_avg = min(fr.average_rank[key] for fr in counted)  # type: ignore[type-var]
-    leaders = [fr.feature for fr in counted if fr.average_rank[key] == best_avg]
-    return (f"most wins: {', '.join(winners)} ({most} of {counted[0].sequences[key]}); best average rank: "
-            f"{', '.join(leaders)} ({best_avg:.2f})")  # fmt: skip
-
-
 def write_report(
     bench_dir: str | Path,
     *,
@@ -605,18 +302,15 @@ def write_report(
 
     A figure that cannot be drawn is reported in ``report.md`` (and to ``log``) instead of failing the report.
     """
-    from dmtrack.experiments.runner import format_seeds
-    from dmtrack.io.trajectory import _atomic_write
-
     root = Path(bench_dir)
-    bench = _read_json(root / "bench.json") or {}
+    bench = read_json(root / BENCH_JSON) or {}
     records = collect_runs(root)
     features = feature_order(records, root)
     rows = results_rows(records)
     write_csv(root / "results.csv", rows, RESULT_COLUMNS)
     # one row per (sequence, feature) cell: the median over its seeds (the run itself with one seed)
     cells = aggregate_seeds(rows)
-    write_csv(root / "tables" / "cells.csv", _cell_csv_rows(cells), CELL_COLUMNS)
+    write_csv(root / "tables" / "cells.csv", cell_csv_rows(cells), CELL_COLUMNS)
     seeded = any(c["runs"] > 1 for c in cells)
     all_seeds = sorted({s for c in cells for s in c["seeds"]})
     cell_of = {(c["sequence"], c["feature"]): c for c in cells}
@@ -667,7 +361,7 @@ def write_report(
     if seeded:
         md.append(
             f"**Several seeds:** the {len(cells)} (sequence, feature) cells were run with "
-            f"{_plural(len(all_seeds), 'seed')} of the random depth initialisation ({format_seeds(all_seeds)}). "
+            f"{plural(len(all_seeds), 'seed')} of the random depth initialisation ({format_seeds(all_seeds)}). "
             "Every table gives per cell the **median over the seeds** and the min–max in brackets; rankings, "
             "wins, averages and timings are computed on the per-cell medians. One run per seed is in "
             "`results.csv` and `runs/<sequence>/<feature>/seed-<S>/`; `tables/cells.csv` has the median, min, "
@@ -715,10 +409,10 @@ def write_report(
         frames = m.get("total_frames", spec.get("max_frames"))
         size = f"{m['width']}×{m['height']}" if m.get("width") else "–"
         seq_rows.append([s, rs[0].dataset, m.get("format") or spec.get("format") or "–",
-                         f"{_fmt(frames)} (from {spec.get('start', 0)})", size,
-                         _fmt(value_of(m, "r_l") or value_of(spec, "r_l"), 4),
-                         _fmt(ev.get("gt_path_length"), 2), len(rs)])  # fmt: skip
-    md.append(_md_table(["Sequence", "Dataset", "Format", "Frames", "Tracked size", "r_l", "GT path", "Runs"],
+                         f"{fmt_value(frames)} (from {spec.get('start', 0)})", size,
+                         fmt_value(value_of(m, "r_l") or value_of(spec, "r_l"), 4),
+                         fmt_value(ev.get("gt_path_length"), 2), len(rs)])  # fmt: skip
+    md.append(md_table(["Sequence", "Dataset", "Format", "Frames", "Tracked size", "r_l", "GT path", "Runs"],
                         seq_rows, "lllrlrrr") + "\n")  # fmt: skip
     inconsistent = []
     for s in seqs:
@@ -739,13 +433,13 @@ def write_report(
     if len(by_dataset) > 1:
         overall = ranking_table(cells, features)
         md.append("## All datasets\n")
-        md.append(_ranking_md(overall) + "\n")
-        md.append(f"*Rankings over all {_plural(len(seqs), 'sequence')} of the {len(by_dataset)} datasets (each "
+        md.append(ranking_md(overall) + "\n")
+        md.append(f"*Rankings over all {plural(len(seqs), 'sequence')} of the {len(by_dataset)} datasets (each "
                   "sequence counts once; ranks are unitless, so datasets can be pooled — errors and times cannot, "
                   "see the per-dataset tables).* "
                   + (f"Medians over seeds {format_seeds(all_seeds)}. " if seeded else "")
-                  + "; ".join(f"{c.label} — {_best(overall, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
-        all_rank_rows += _ranking_csv_rows("(all datasets)", overall, {f: seeds_of(
+                  + "; ".join(f"{c.label} — {best_text(overall, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
+        all_rank_rows += ranking_csv_rows("(all datasets)", overall, {f: seeds_of(
             c for c in cells if c["feature"] == f) for f in features})  # fmt: skip
 
     all_seq_rank_rows: list[dict[str, Any]] = []
@@ -763,47 +457,47 @@ def write_report(
         timings = timing_table(drows, dfeatures)
         fseeds = {f: seeds_of(c for c in drows if c["feature"] == f) for f in dfeatures}
         dseeds = seeds_of(drows)
-        all_rank_rows += _ranking_csv_rows(dataset, ranking, fseeds)
+        all_rank_rows += ranking_csv_rows(dataset, ranking, fseeds)
         for s, per in ranks.items():
             for f, rk in per.items():
                 c = cell_of.get((s, f))
                 all_seq_rank_rows.append({"dataset": dataset, "sequence": s, "feature": f,
                                           **{f"{k}_rank": v for k, v in rk.items()},
                                           "seeds": format_seeds(c["seeds"]) if c else None})  # fmt: skip
-        all_avg_rows += _dc_rows(dataset, averages, fseeds)
-        all_time_rows += _dc_rows(dataset, timings, fseeds)
+        all_avg_rows += dataclass_rows(dataset, averages, fseeds)
+        all_time_rows += dataclass_rows(dataset, timings, fseeds)
         over = f" Per cell: median over seeds {dseeds}; the tables below use those medians." if seeded else ""
 
         md.append(f"## {dataset}\n")
-        md.append(f"{_plural(len(dseqs), 'sequence')}: {', '.join(dseqs)}. "
+        md.append(f"{plural(len(dseqs), 'sequence')}: {', '.join(dseqs)}. "
                   + (f"Ground-truth lengths in {unit}; errors in deg/{unit}." if len(dunits) == 1 else
                      f"**Warning:** its sequences use different length units ({', '.join(dunits)}).")
                   + over + "\n")  # fmt: skip
         # rankings
         table_no += 1
         md.append("### Rankings\n")
-        md.append(_ranking_md(ranking) + "\n")
+        md.append(ranking_md(ranking) + "\n")
         md.append(f"*Table {table_no}. Experimental rankings for the {dataset} dataset "
-                  f"({_plural(len(dseqs), 'sequence')}"
+                  f"({plural(len(dseqs), 'sequence')}"
                   + (f", ranked by the medians over seeds {dseeds}" if seeded else "") + ").* "
-                  + "; ".join(f"{c.label} — {_best(ranking, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
+                  + "; ".join(f"{c.label} — {best_text(ranking, c.key)}" for c in CRITERIA) + ".\n")  # fmt: skip
         # averages (Table 6 layout: features as columns)
         table_no += 1
         md.append("### Overall averages\n")
-        md.append(_averages_table(averages, unit) + "\n")
-        md.append(f"*Table {table_no}. Overall averages among the {_plural(len(dseqs), 'sequence')} of {dataset} "
+        md.append(averages_md(averages, unit) + "\n")
+        md.append(f"*Table {table_no}. Overall averages among the {plural(len(dseqs), 'sequence')} of {dataset} "
                   + (f"of the per-cell medians over seeds {dseeds} (n = number of cells with a value).*\n" if seeded
                      else "(n = number of runs with a value).*\n"))  # fmt: skip
         # timings
         table_no += 1
         md.append("### Processing times\n")
         channels = {r["feature"]: r.get("channels") for r in drows if r.get("channels")}
-        md.append(_md_table(
+        md.append(md_table(
             ["Feature", "Channels", "Feature (ms)", "I/O (ms)", "Tracking (ms)", "Mapping (ms)", "Total (ms)",
              "Total (fps)", "Wall fps", "Frames"],
-            [[t.feature, channels.get(t.feature, "–"), _fmt(t.feature_ms, 1), _fmt(t.io_ms, 1),
-              _fmt(t.tracking_ms, 1), _fmt(t.mapping_ms, 1), _fmt(t.total_ms, 1), _fmt(t.fps, 1),
-              _fmt(t.wall_fps, 1), t.frames] for t in timings],
+            [[t.feature, channels.get(t.feature, "–"), fmt_value(t.feature_ms, 1), fmt_value(t.io_ms, 1),
+              fmt_value(t.tracking_ms, 1), fmt_value(t.mapping_ms, 1), fmt_value(t.total_ms, 1), fmt_value(t.fps, 1),
+              fmt_value(t.wall_fps, 1), t.frames] for t in timings],
         ) + "\n")  # fmt: skip
         md.append(f"*Table {table_no}. Average times per frame on {dataset} (frame-weighted over "
                   + (f"the per-cell medians over seeds {dseeds} of {sum(t.runs for t in timings)} cells).*\n"
@@ -814,13 +508,13 @@ def write_report(
         for c in drows:
             rk = ranks[c["sequence"]][c["feature"]]
             prow.append([c["sequence"], c["feature"]] + ([format_seeds(c["seeds"]) or "–"] if seeded else [])
-                        + [_cell_status(c), _cell_value(c, "tracked_frames", 1, f"/{_fmt(c['total_frames'])}"),
-                           _fmt(rk.get("tracked_frames")), _cell_value(c, "rpe_rot_deg_per_m", 3),
-                           _fmt(rk.get("rpe_rot_deg_per_m")), _cell_value(c, "rpe_trans_angle_deg_per_m", 3),
-                           _fmt(rk.get("rpe_trans_angle_deg_per_m")), _cell_value(c, "ate_rmse", 4),
-                           _cell_value(c, "total_ms", 1), _cell_value(c, "fps", 1)])  # fmt: skip
+                        + [cell_status(c), cell_value(c, "tracked_frames", 1, f"/{fmt_value(c['total_frames'])}"),
+                           fmt_value(rk.get("tracked_frames")), cell_value(c, "rpe_rot_deg_per_m", 3),
+                           fmt_value(rk.get("rpe_rot_deg_per_m")), cell_value(c, "rpe_trans_angle_deg_per_m", 3),
+                           fmt_value(rk.get("rpe_trans_angle_deg_per_m")), cell_value(c, "ate_rmse", 4),
+                           cell_value(c, "total_ms", 1), cell_value(c, "fps", 1)])  # fmt: skip
         md.append(
-            _md_table(
+            md_table(
                 ["Sequence", "Feature"] + (["Seeds"] if seeded else []) + [
                     "Status", "Tracked", "Rank", f"RPE rot. (deg/{unit})", "Rank", f"RPE trans. ang. (deg/{unit})",
                     "Rank", f"ATE ({unit})", "Total (ms)", "fps",
@@ -852,7 +546,7 @@ def write_report(
                                   "ms_range": _mean_range(mine, "total_ms", weighted=True)}  # fmt: skip
                     pts.append(plots.SpeedAccuracy(a.feature, t.total_ms, rot, trans, **ranges))
             note = (
-                f"errors averaged over the {_plural(averages[0].n_common, 'sequence')} where every feature has them"
+                f"errors averaged over the {plural(averages[0].n_common, 'sequence')} where every feature has them"
                 if averages and averages[0].n_common
                 else "errors averaged over the runs that have them"
             )
@@ -950,44 +644,8 @@ def write_report(
               + ("`runs/<sequence>/<feature>/seed-<S>/`. " if seeded else "`runs/<sequence>/<feature>/`. ")
               + "Rebuild this report with `dmtrack report " + str(root) + "`.\n")  # fmt: skip
     out = root / "report.md"
-    _atomic_write(out, "\n".join(md).rstrip() + "\n")
+    write_text(out, "\n".join(md).rstrip() + "\n")
     return out
 
 
-def _ranking_md(table: Sequence[FeatureRanking]) -> str:
-    hdr = ["Feature"] + [f"{c.label}: {w}" for c in CRITERIA for w in ("Wins Count", "Average Ranking")]
-    body = [[fr.feature] + [x for c in CRITERIA for x in (fr.wins[c.key], _fmt(fr.average_rank[c.key]))]
-            for fr in table]  # fmt: skip
-    return _md_table(hdr, body)
-
-
-def _averages_table(averages: Sequence[FeatureAverages], unit: str) -> str:
-    def with_n(v: float | None, n: int, digits: int = 2) -> str:
-        return "–" if v is None else f"{v:.{digits}f} (n={n})"
-
-    hdr = ["Average metric"] + [a.feature for a in averages]
-    rows = [
-        ["Tracked-frame fraction"] + [with_n(a.tracked_fraction, a.n_tracked, 3) for a in averages],
-        ["Number of tracked frames"] + [_fmt(a.tracked_frames, 1) for a in averages],
-        [f"RPE rotation error (deg/{unit})"] + [with_n(a.rpe_rot, a.n_rpe_rot) for a in averages],
-        [f"RPE trans. angle error (deg/{unit})"] + [with_n(a.rpe_trans, a.n_rpe_trans) for a in averages],
-        [f"RPE rotation, common sequences (deg/{unit})"] + [with_n(a.common_rpe_rot, a.n_common) for a in averages],
-        [f"RPE trans. angle, common sequences (deg/{unit})"]
-        + [with_n(a.common_rpe_trans, a.n_common) for a in averages],
-        [f"ATE ({unit})"] + [with_n(a.ate, a.n_ate, 4) for a in averages],
-    ]
-    return _md_table(hdr, rows)
-
-
-__all__ = [
-    "AVERAGE_COLUMNS",
-    "RANKING_COLUMNS",
-    "RESULT_COLUMNS",
-    "TIMING_COLUMNS",
-    "RunRecord",
-    "collect_runs",
-    "feature_order",
-    "results_rows",
-    "write_csv",
-    "write_report",
-]
+__all__ = ["FIGURE_PREFIXES", "representatives", "write_report"]

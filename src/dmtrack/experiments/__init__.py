@@ -1,36 +1,36 @@
 """dmtrack.experiments: the benchmark grid runner (``dmtrack bench``) and its backends.
 
-* :mod:`dmtrack.experiments.runner` — :func:`run_bench` runs every (sequence, feature) pair (× seeds) in
+* :mod:`dmtrack.experiments.bench` — :func:`run_bench` runs every (sequence, feature) pair (× seeds) in
   parallel processes, resumably, and writes the report (:mod:`dmtrack.evaluation.report`);
-* :mod:`dmtrack.experiments.dask_backend` — the same on a Dask distributed cluster;
+* :mod:`dmtrack.experiments.grid` — the grid: sequences (:class:`SequenceSpec`, the sequences file) and runs
+  (:class:`RunTask`, :func:`plan_grid`);
+* :mod:`dmtrack.experiments.task` — one run → one record (:func:`execute_task`);
+* :mod:`dmtrack.experiments.store` — which runs are done (:func:`run_state`), atomic run folders;
+* :mod:`dmtrack.experiments.backends` — in this process or a pool of local processes;
+  :mod:`dmtrack.experiments.dask_backend` — the same on a Dask distributed cluster;
 * :mod:`dmtrack.experiments.cli` — the ``bench`` and ``report`` subcommands.
+
+The bench folder's layout, seed lists (``parse_seeds``) and dataset labels are :mod:`dmtrack.io.bench_layout`.
 """
 
-from dmtrack.experiments.runner import (
-    BenchResult,
+from dmtrack.experiments.bench import BenchResult, run_bench
+from dmtrack.experiments.grid import (
     ResolvedSequence,
     RunTask,
     SequenceSpec,
-    dataset_label,
-    execute_task,
-    format_seeds,
     load_sequences_file,
-    parse_seeds,
     plan_grid,
-    run_bench,
-    run_state,
 )
+from dmtrack.experiments.store import run_state
+from dmtrack.experiments.task import execute_task
 
 __all__ = [
     "BenchResult",
     "ResolvedSequence",
     "RunTask",
     "SequenceSpec",
-    "dataset_label",
     "execute_task",
-    "format_seeds",
     "load_sequences_file",
-    "parse_seeds",
     "plan_grid",
     "run_bench",
     "run_state",

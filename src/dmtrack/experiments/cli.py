@@ -21,7 +21,7 @@ _PCA_NAME = re.compile(r"^.+-pca[0-9]+$")
 
 
 def _r_l(text: str) -> float:
-    from dmtrack.experiments.runner import parse_r_l
+    from dmtrack.experiments.grid import parse_r_l
 
     try:
         return parse_r_l(text)
@@ -184,18 +184,10 @@ def _check_features(names: list[str]) -> None:
             get_entry(name)  # InputError listing the known names
 
 
-def _sigterm_as_interrupt() -> None:
-    """``kill PID`` of a bench must clean up like Ctrl-C: stop the workers, leave no half-written run."""
-    import signal
-
-    def handler(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, handler)
-
-
 def cmd_bench(args: argparse.Namespace) -> int:
-    from dmtrack.experiments.runner import SequenceSpec, format_seeds, load_sequences_file, parse_seeds, run_bench
+    from dmtrack.experiments.bench import run_bench
+    from dmtrack.experiments.grid import SequenceSpec, load_sequences_file
+    from dmtrack.io.bench_layout import format_seeds, parse_seeds
 
     seeds: list[int] | None = None
     if args.seeds is not None:
@@ -206,7 +198,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             seeds = parse_seeds(args.seeds)
         except InputError as e:
             raise InputError(f"--seeds: {str(e).removeprefix('seeds: ')}") from None
-    _sigterm_as_interrupt()
+    # SIGTERM (`kill PID`) arrives as dmtrack.errors.Interrupted, a KeyboardInterrupt (dmtrack.cli.main installs
+    # it for every command): the bench stops its workers and leaves no half-written run, as on Ctrl-C
 
     features = [f.strip() for item in args.features for f in item.split(",") if f.strip()]
     _check_features(features)
@@ -258,7 +251,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from dmtrack.evaluation.report import collect_runs, write_report
+    from dmtrack.evaluation.records import collect_runs
+    from dmtrack.evaluation.report import write_report
 
     root = Path(args.bench_dir)
     if not (root / "runs").is_dir():

@@ -2,7 +2,7 @@
 
 Needs the optional extra ``cluster`` (``pip install "dmtrack[cluster]"``, i.e. ``dask[distributed]``) on the
 machine running ``dmtrack bench`` *and* on every worker, with the same dmtrack version installed (tasks
-call :func:`dmtrack.experiments.runner.execute_task` by reference).
+call :func:`dmtrack.experiments.task.execute_task` by reference).
 
 How it works: the bench process connects a :class:`distributed.Client` to the scheduler, decides which runs
 are already done (reading ``DIR``), submits one task per remaining run (``Client.submit``, not pure, no
@@ -32,7 +32,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from dmtrack.errors import InputError
-from dmtrack.experiments.runner import OnDone, RunTask, execute_task, record_failure
+from dmtrack.experiments.backends import OnDone
+from dmtrack.experiments.grid import RunTask
+from dmtrack.experiments.task import execute_task, record_failure
 
 INSTALL_HINT = 'running on a Dask cluster needs dask.distributed: pip install "dmtrack[cluster]"'
 

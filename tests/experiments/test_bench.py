@@ -1,31 +1,25 @@
-"""The bench grid runner: parallel runs, files, resuming, crashes, worker deaths, sequences files, CLI.
+"""The bench (:func:`~dmtrack.experiments.bench.run_bench`): parallel runs, files, resuming, crashes, CLI.
 
 One real bench (synthetic sequence × gray, gray-affine, plus a sequence that does not exist) runs once per
-module in 2 spawned worker processes; the other tests work on copies of its folder.  The first odometry
-run in a fresh process loads (or compiles) the numba kernels, so these tests keep process starts few.
+module in 2 spawned worker processes; the other tests work on copies of its folder (``bench_copy``).  The
+first odometry run in a fresh process loads (or compiles) the numba kernels, so these tests keep process
+starts few.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import shutil
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dmtrack.errors import InputError
+from dmtrack.experiments.bench import run_bench
 from dmtrack.experiments.cli import add_bench_parser, add_report_parser
-from dmtrack.experiments.runner import (
-    SequenceSpec,
-    load_sequences_file,
-    plan_grid,
-    run_bench,
-    run_state,
-    run_tasks_processes,
-)
+from dmtrack.experiments.grid import plan_grid
+from dmtrack.experiments.store import run_state
 from dmtrack.features.base import register, unregister
 from dmtrack.features.gray import GrayFeature
 from dmtrack.io.trajectory import read_tum
@@ -43,16 +37,6 @@ def grid(tmp_path_factory: pytest.TempPathFactory):
     out = tmp_path_factory.mktemp("bench") / "out"
     result = run_bench([SYN, MISSING], FEATURES, out, jobs=2, max_frames=N, progress=False)
     return out, result
-
-
-def copy_of(grid, tmp_path: Path) -> Path:
-    dst = tmp_path / "copy"
-    shutil.copytree(grid[0], dst)
-    return dst
-
-
-def mtimes(root: Path) -> dict[str, int]:
-    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in sorted((root / "runs").glob("*/*/*.json"))}
 
 
 # ------------------------------------------------------------------------------------------------ a grid
@@ -111,8 +95,8 @@ def test_grid_writes_the_report(grid):
 
 
 # ---------------------------------------------------------------------------------------------- resuming
-def test_second_invocation_skips_finished_runs(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_second_invocation_skips_finished_runs(bench_copy: Path, mtimes):
+    out = bench_copy
     before = mtimes(out)
     res = run_bench([SYN, MISSING], FEATURES, out, jobs=2, max_frames=N, skip_failed=True, progress=False,
                     figures=False)  # fmt: skip
@@ -120,8 +104,8 @@ def test_second_invocation_skips_finished_runs(grid, tmp_path: Path):
     assert mtimes(out) == before
 
 
-def test_failed_runs_are_retried_by_default(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_failed_runs_are_retried_by_default(bench_copy: Path, mtimes):
+    out = bench_copy
     before = mtimes(out)
     res = run_bench([SYN, MISSING], FEATURES, out, jobs=0, max_frames=N, progress=False, report=False)
     assert sorted(res.executed) == sorted(FAILED_KEYS) and sorted(res.skipped) == sorted(OK_KEYS)
@@ -132,8 +116,8 @@ def test_failed_runs_are_retried_by_default(grid, tmp_path: Path):
         assert after[f"runs/{key}/error.json"] != before[f"runs/{key}/error.json"]
 
 
-def test_killed_bench_is_resumed_without_redoing_finished_runs(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_killed_bench_is_resumed_without_redoing_finished_runs(grid, bench_copy: Path, mtimes):
+    out = bench_copy
     gray = out / "runs" / "synthetic-seed1" / "gray"
     (gray / "metrics.json").unlink()  # killed before it finished: a partial folder without metrics.json
     (gray / "leftover.txt").write_text("from the killed run")
@@ -157,8 +141,8 @@ def test_killed_bench_is_resumed_without_redoing_finished_runs(grid, tmp_path: P
     assert np.allclose(a.poses, b.poses, atol=1e-6)
 
 
-def test_run_state_compares_the_spec(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_run_state_compares_the_spec(bench_copy: Path):
+    out = bench_copy
     tasks, _ = plan_grid([SYN, MISSING], FEATURES, out, max_frames=N)
     states = {t.key: run_state(t) for t in tasks}
     assert states == {**dict.fromkeys(OK_KEYS, "done"), **dict.fromkeys(FAILED_KEYS, "failed")}
@@ -188,8 +172,8 @@ class _ExplodingFeature(GrayFeature):
         return super()._compute(image, gain)
 
 
-def test_a_feature_that_raises_is_recorded_and_the_others_finish(grid, tmp_path: Path):
-    out = copy_of(grid, tmp_path)
+def test_a_feature_that_raises_is_recorded_and_the_others_finish(bench_copy: Path):
+    out = bench_copy
     register("test-explodes", _ExplodingFeature, channels=1, replace=True)
     try:
         res = run_bench([SYN], ["test-explodes", "gray"], out, jobs=0, max_frames=N, progress=False, figures=False)
@@ -206,86 +190,6 @@ def test_a_feature_that_raises_is_recorded_and_the_others_finish(grid, tmp_path:
     assert "test-explodes: **failed** — RuntimeError: feature exploded on its 4th frame (after 3 tracked frames)" in md
 
 
-def test_a_dying_worker_is_retried_alone_then_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    helper = tmp_path / "helpers"
-    helper.mkdir()
-    (helper / "dmtrack_test_crash_helper.py").write_text(
-        textwrap.dedent("""
-        import os
-
-        def run(task):
-            if task.feature == "boom":
-                os._exit(3)  # the worker process dies
-            return {"key": task.key, "status": "ok", "tracked_frames": 1, "total_frames": 1, "lost_at": None,
-                    "message": None, "elapsed_s": 0.0, "run_dir": str(task.run_dir)}
-    """)
-    )
-    monkeypatch.syspath_prepend(str(helper))  # spawned workers get the parent's sys.path
-    import dmtrack_test_crash_helper as h
-
-    tasks, _ = plan_grid([MISSING], ["gray", "boom", "gray-affine", "rgb"], tmp_path / "b")
-    done: dict[str, str] = {}
-    run_tasks_processes(tasks, 2, lambda t, o: done.__setitem__(t.key, o["status"]), fn=h.run)
-    assert done == {"dmtrack-test-sequence/gray": "ok", "dmtrack-test-sequence/boom": "failed",
-                    "dmtrack-test-sequence/gray-affine": "ok", "dmtrack-test-sequence/rgb": "ok"}  # fmt: skip
-    err = json.loads((tmp_path / "b" / "runs" / "dmtrack-test-sequence" / "boom" / "error.json").read_text())
-    assert err["type"] == "WorkerError" and "died twice" in err["message"]
-
-
-# -------------------------------------------------------------------------------------- planning and files
-def test_plan_grid_names_and_specs(tmp_path: Path):
-    tasks, seqs = plan_grid([SequenceSpec(MISSING, dataset="Mine"), MISSING, SYN], ["gray", "dsift"], tmp_path,
-                            seed=3, overrides=["tracker.huber_d=2"])  # fmt: skip
-    assert [s.name for s in seqs] == ["dmtrack-test-sequence", "dmtrack-test-sequence-2", "synthetic-seed1"]
-    assert [s.dataset for s in seqs] == ["Mine", "unknown", "synthetic"]
-    assert seqs[0].open_error and "no such file" in seqs[0].open_error
-    assert [t.key for t in tasks][:2] == ["dmtrack-test-sequence/gray", "dmtrack-test-sequence/dsift"]
-    spec = tasks[0].spec
-    assert spec["seed"] == 3 and spec["overrides"] == ["tracker.huber_d=2"]
-    assert spec["config"]["tracker"]["huber_d"] == 2.0 and spec["sequence"] == MISSING
-    with pytest.raises(InputError):
-        plan_grid([SYN], ["gray"], tmp_path, overrides=["tracker.no_such_key=1"])
-    with pytest.raises(InputError, match="twice"):
-        plan_grid([SYN], ["gray", "gray"], tmp_path)
-
-
-def test_sequences_file(tmp_path: Path):
-    (tmp_path / "data" / "seqA").mkdir(parents=True)
-    f = tmp_path / "conf" / "seqs.yaml"
-    f.parent.mkdir()
-    f.write_text(
-        textwrap.dedent("""
-        defaults: {max_frames: 50}
-        sequences:
-          - ../data/seqA
-          - path: ../data/seqA
-            name: tsukuba-lamps
-            format: image-folder
-            intrinsics: [615, 615, 320, 240]
-            r_l: 1/20
-            max_frames: 150
-            start: 5
-            dataset: Tsukuba
-            unit: cm
-          - {path: "synthetic:n_frames=10", r_l: 0.25}
-    """)
-    )
-    a, b, c = load_sequences_file(f)
-    assert a == SequenceSpec(str((tmp_path / "data" / "seqA").resolve()), max_frames=50)
-    assert b.name == "tsukuba-lamps" and b.intrinsics == "615,615,320,240" and b.r_l == pytest.approx(0.05)
-    assert (b.max_frames, b.start, b.dataset, b.unit, b.format) == (150, 5, "Tsukuba", "cm", "image-folder")
-    assert c.path == "synthetic:n_frames=10" and c.r_l == 0.25 and c.max_frames == 50
-    f.write_text("sequences:\n  - {path: x, colour: true}\n")
-    with pytest.raises(InputError, match="unknown key"):
-        load_sequences_file(f)
-    f.write_text("sequences:\n  - {path: x, r_l: 3}\n")
-    with pytest.raises(InputError, match="r_l"):
-        load_sequences_file(f)
-    f.write_text("sequences: [a, b\n")
-    with pytest.raises(InputError, match="invalid YAML"):
-        load_sequences_file(f)
-
-
 # ------------------------------------------------------------------------------------------------- the CLI
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dmtrack")
@@ -295,8 +199,8 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def test_cli_bench_resumes_the_same_grid(grid, tmp_path: Path, capsys: pytest.CaptureFixture[str]):
-    out = copy_of(grid, tmp_path)
+def test_cli_bench_resumes_the_same_grid(bench_copy: Path, capsys: pytest.CaptureFixture[str]):
+    out = bench_copy
     args = parser().parse_args(
         [
             "bench",
@@ -330,78 +234,3 @@ def test_cli_bench_errors(tmp_path: Path):
         args.func(args)
     with pytest.raises(SystemExit):
         p.parse_args(["bench", "--sequences", SYN, "--features", "gray", "--out", "x", "--r-l", "2"])
-
-
-def test_limit_threads_leaves_numbas_pool_size_alone_once_imported(monkeypatch: pytest.MonkeyPatch):
-    # numba re-reads NUMBA_NUM_THREADS at every compilation and raises if it changed after its threads started
-    import os
-
-    import cv2
-    import numba
-
-    from dmtrack.experiments.runner import THREAD_ENV_VARS, limit_threads
-
-    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
-    for var in THREAD_ENV_VARS[1:]:
-        monkeypatch.setenv(var, "7")  # restored by monkeypatch
-    cv_threads, nb_threads = cv2.getNumThreads(), numba.get_num_threads()
-    try:
-        limit_threads(1)
-        assert "NUMBA_NUM_THREADS" not in os.environ
-        assert os.environ["OMP_NUM_THREADS"] == "1" and numba.get_num_threads() == 1
-    finally:
-        numba.set_num_threads(nb_threads)
-        cv2.setNumThreads(cv_threads)
-
-
-def _children(pid: int) -> list[int]:
-    """Processes whose parent is ``pid`` (from /proc; Linux)."""
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
-
-
-def _alive(pid: int) -> bool:
-    stat = Path(f"/proc/{pid}/stat")
-    try:
-        return stat.read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
-
-
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to find the worker processes")
-@pytest.mark.parametrize("signame", ["SIGTERM", "SIGKILL"])
-def test_killing_a_bench_stops_its_workers(tmp_path: Path, signame: str) -> None:
-    """`kill` (SIGTERM) or `kill -9` of a running bench: no worker goes on computing into DIR; resuming works."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
-    out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "dmtrack.cli", "bench", "--sequences", "synthetic:n_frames=400,width=320,height=240",
-           "--features", "gray", "--out", str(out), "--jobs", "2", "--no-progress"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 120
-        while not list((out / "runs").glob("*/.*tmp-*")):  # a worker has started its run
-            assert proc.poll() is None and time.monotonic() < deadline, "the bench did not start a run"
-            time.sleep(0.2)
-        workers = [p for p in _children(proc.pid) if p != proc.pid]
-        assert workers, "no worker process found"
-        proc.send_signal(getattr(signal, signame))
-        proc.wait(timeout=30)
-        deadline = time.monotonic() + 15
-        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert not any(_alive(w) for w in workers), "a worker outlived the bench"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert not list((out / "runs").glob("*/*/metrics.json"))  # nothing finished, nothing half-written

@@ -1,0 +1,151 @@
+"""The bench's result store: which runs are done, and the atomic commit of a run folder.
+
+The bench folder's layout is :mod:`dmtrack.io.bench_layout` (the report reads the same folder).
+
+Resuming
+--------
+A run is *done* when its folder holds a ``metrics.json`` and a ``spec.json`` equal to the spec the grid
+would run now (:func:`dmtrack.experiments.grid.make_spec`) — sequence (absolute path or ``synthetic:…``
+string), format, intrinsics, feature, start, max_frames, seed, r_l, the whole odometry configuration after
+``--set`` overrides, whether depth images and the point cloud are written, and the dmtrack version.  The seed
+compares as the seed the run uses: no seed (the configuration's ``seed``, 0 by default) equals that seed given
+explicitly (:func:`same_spec`).  Each seed's run is its own task, so a killed multi-seed bench resumes per
+seed.  Done runs are skipped; anything else (no folder, a folder without ``metrics.json``, a different spec)
+is (re)run.  A crashed run (``error.json``, no ``metrics.json``) is run again unless ``skip_failed``.  A
+tracking loss is not a crash: the run finishes with ``lost_at`` in ``metrics.json``.
+
+Atomic results
+--------------
+A run writes into a hidden temporary folder next to its final one (:func:`run_folder`:
+``runs/<sequence>/.<feature>.tmp-<host>-<pid>-<random>``; ``.seed-<S>.tmp-…`` in the feature folder) and is
+moved into place with ``os.replace`` only when complete (:func:`commit`: the old folder, if any, is first
+renamed away and then deleted).  A killed bench therefore never leaves a half-written ``metrics.json``; its
+leftover temporary folders are deleted by the next bench on the same ``DIR`` (:func:`clean_stale`) — so two
+benches must not write into the same ``DIR`` at the same time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import socket
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from dmtrack.experiments.grid import RunTask
+from dmtrack.io.bench_layout import (
+    ERROR_JSON,
+    METRICS_JSON,
+    RUNS_DIR,
+    SEED_DIR,
+    SPEC_JSON,
+    effective_seed,
+    read_json,
+    safe_name,
+    write_json,
+)
+
+
+# ============================================================================================ resuming
+def run_state(task: RunTask) -> str:
+    """``"done"`` (metrics.json and an equal spec.json), ``"failed"`` (error.json and an equal spec) or
+    ``"todo"``."""
+    d = task.run_dir
+    if not same_spec(read_json(d / SPEC_JSON), task.spec):
+        return "todo"
+    if isinstance(read_json(d / METRICS_JSON), dict):
+        return "done"
+    if (d / ERROR_JSON).is_file():
+        return "failed"
+    return "todo"
+
+
+def same_spec(stored: Any, wanted: dict[str, Any]) -> bool:
+    """Whether a stored ``spec.json`` defines the same run as ``wanted``: equal, except that the seed compares
+    as :func:`~dmtrack.io.bench_layout.effective_seed` (no seed with a configuration seed 0 is the same run
+    as seed 0)."""
+    if not isinstance(stored, dict):
+        return False
+    if stored == wanted:
+        return True
+    a, b = dict(stored), dict(wanted)
+    a["seed"], b["seed"] = effective_seed(stored), effective_seed(wanted)
+    return a == b
+
+
+# ============================================================================================ run folders
+def _temp_dir(task: RunTask) -> Path:
+    host = safe_name(socket.gethostname())[:40]
+    final = task.run_dir
+    tmp = final.with_name(f".{final.name}.tmp-{host}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    tmp.mkdir(parents=True)
+    return tmp
+
+
+@contextlib.contextmanager
+def run_folder(task: RunTask) -> Iterator[Path]:
+    """A fresh temporary folder for ``task``'s run, holding its ``spec.json``; :func:`commit` it when complete.
+
+    The folder is deleted if the block raises (an interrupt included); after a commit nothing is left to delete.
+    """
+    tmp = _temp_dir(task)
+    try:
+        write_json(tmp / SPEC_JSON, task.spec)
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def commit(tmp: Path, final: Path) -> None:
+    """Move the finished temporary folder ``tmp`` to ``final`` (replacing it) with ``os.replace``.
+
+    The ``seed-<S>/`` runs inside a replaced feature folder (a folder benched with one seed and with several)
+    are moved into the new one, each with ``os.replace``: they are kept, not deleted with the old run.
+    """
+    trash = None
+    if final.exists():
+        trash = final.with_name(f".{final.name}.trash-{uuid.uuid4().hex[:8]}")
+        os.replace(final, trash)
+    os.replace(tmp, final)
+    if trash is not None:
+        for child in sorted(trash.iterdir()):
+            if child.is_dir() and SEED_DIR.match(child.name) and not (final / child.name).exists():
+                os.replace(child, final / child.name)
+        shutil.rmtree(trash, ignore_errors=True)
+
+
+_STALE_SEED_DIR = re.compile(r"^\.seed-\d+\.(?:tmp|trash)-")
+
+
+def _is_stale(p: Path) -> bool:
+    return p.name.startswith(".") and (".tmp-" in p.name or ".trash-" in p.name)
+
+
+def clean_stale(bench_dir: str | Path) -> list[Path]:
+    """Delete the temporary / trash folders a killed bench left in ``DIR/runs/*/`` and, for the runs of
+    several seeds, in ``DIR/runs/*/*/``; returns them."""
+    removed = []
+    runs = Path(bench_dir) / RUNS_DIR
+    if not runs.is_dir():
+        return removed
+    for seq_dir in runs.iterdir():
+        if not seq_dir.is_dir():
+            continue
+        for d in seq_dir.iterdir():
+            if _is_stale(d):
+                shutil.rmtree(d, ignore_errors=True) if d.is_dir() else d.unlink(missing_ok=True)
+                removed.append(d)
+            elif d.is_dir() and not d.name.startswith("."):
+                for sub in d.iterdir():
+                    if sub.is_dir() and _STALE_SEED_DIR.match(sub.name):
+                        shutil.rmtree(sub, ignore_errors=True)
+                        removed.append(sub)
+    return removed
+
+
+__all__ = ["clean_stale", "commit", "run_folder", "run_state", "same_spec"]

@@ -86,7 +86,7 @@ def test_cli_threads_option_gives_the_same_trajectory(
 
     import numba
 
-    from dmtrack.experiments.runner import THREAD_ENV_VARS
+    from dmtrack.experiments.task import THREAD_ENV_VARS
 
     for var in (*THREAD_ENV_VARS, "DMTRACK_FEATURE_THREADS"):  # restored by monkeypatch afterwards
         if var in os.environ:

@@ -16,7 +16,7 @@ from collections.abc import Sequence as _Seq
 from typing import Any
 
 from dmtrack import __version__
-from dmtrack.errors import DmtrackError
+from dmtrack.errors import DmtrackError, Interrupted
 
 
 def _add_sequence_args(p: argparse.ArgumentParser) -> None:
@@ -124,7 +124,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     if args.threads is not None:
         from dmtrack.errors import InputError
-        from dmtrack.experiments.runner import limit_threads
+        from dmtrack.experiments.task import limit_threads
 
         if args.threads < 1:
             raise InputError(f"--threads must be ≥ 1, got {args.threads}")
@@ -145,21 +145,26 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
     from dmtrack.features import get_feature
 
-    result = run_to_directory(
-        args.sequence,
-        out,
-        feature=get_feature(args.feature, **_feature_options(args.feature_opt)),
-        config=config,
-        start=args.start,
-        max_frames=args.max_frames,
-        seed=args.seed,
-        format=args.format,
-        intrinsics=args.intrinsics,
-        r_l=args.r_l,
-        depth_images=not args.no_depth_images,
-        pointcloud=not args.no_pointcloud,
-        progress=None if args.progress is None else args.progress,
-    )
+    try:
+        result = run_to_directory(
+            args.sequence,
+            out,
+            feature=get_feature(args.feature, **_feature_options(args.feature_opt)),
+            config=config,
+            start=args.start,
+            max_frames=args.max_frames,
+            seed=args.seed,
+            format=args.format,
+            intrinsics=args.intrinsics,
+            r_l=args.r_l,
+            depth_images=not args.no_depth_images,
+            pointcloud=not args.no_pointcloud,
+            progress=None if args.progress is None else args.progress,
+        )
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the finished frames and their metrics are saved
+        print(f"dmtrack: {_interrupt_text(e)}: the trajectory and metrics of the finished frames are in {out}/",
+              file=sys.stderr)
+        return _interrupt_code(e)
     m = result.metrics
     lost = "never lost" if m["lost_at"] is None else f"lost at frame {m['lost_at']} ({m['lost_reason']})"
     print(f"{m['sequence']} [{m['feature']}]: tracked {m['tracked_frames']}/{m['total_frames']} frames, {lost}; "
@@ -403,18 +408,43 @@ def _showwarning(message, category, filename, lineno, file=None, line=None) -> N
     print(f"dmtrack: warning: {message}", file=sys.stderr)
 
 
+def _interrupt_text(e: KeyboardInterrupt) -> str:
+    return str(e) if isinstance(e, Interrupted) else "interrupted by SIGINT"
+
+
+def _interrupt_code(e: KeyboardInterrupt) -> int:
+    return e.exit_code if isinstance(e, Interrupted) else 130
+
+
+def _terminate_as_interrupt() -> None:
+    """SIGTERM (``kill PID``, a job scheduler's stop) and SIGHUP stop a command like Ctrl-C does (main thread only)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise Interrupted(signal.Signals(signum).name, signum)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), handler)
+
+
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     warnings.showwarning = _showwarning
+    _terminate_as_interrupt()
     try:
         return int(args.func(args) or 0)
     except DmtrackError as e:
         print(f"dmtrack: error: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("dmtrack: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        print(f"dmtrack: {_interrupt_text(e)}", file=sys.stderr)
+        return _interrupt_code(e)
     except BrokenPipeError:  # output piped into `head` and closed early
         import os
 

@@ -43,3 +43,28 @@ class TrackingLost(DmtrackError):
         self.frame = frame
         self.reason = reason
         super().__init__(f"tracking lost at frame {frame}: {reason}")
+
+
+class OutputError(DmtrackError):
+    """An output file could not be written (disk full, read-only folder, a path that is a folder, …).
+
+    ``path`` names the file; ``errno`` is the operating system's error number when there is one.
+    """
+
+    def __init__(self, message: str, path: str | Path, errno: int | None = None):
+        self.path = Path(path)
+        self.errno = errno
+        self.reason = message
+        super().__init__(f"{path}: {message}")
+
+
+class Interrupted(KeyboardInterrupt):
+    """A termination signal (SIGTERM, SIGHUP) turned into an interrupt, so runs stop as cleanly as on Ctrl-C.
+
+    ``signal_name`` is e.g. ``"SIGTERM"``; ``exit_code`` is the shell convention 128 + signal number.
+    """
+
+    def __init__(self, signal_name: str, signal_number: int):
+        self.signal_name = signal_name
+        self.exit_code = 128 + int(signal_number)
+        super().__init__(f"interrupted by {signal_name}")

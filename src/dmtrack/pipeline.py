@@ -1,8 +1,7 @@
-"""The Python API: track a sequence with a feature and get poses, keyframes, timings and metrics.
+"""One sequence → one run: the odometry loop driven over a sequence, its metrics, and the run folder.
 
->>> import dmtrack
->>> result = dmtrack.track("data/7scenes-redkitchen-0000-0299", feature="gray", max_frames=100)  # doctest: +SKIP
->>> result.trajectory, result.tracked_frames, result.metrics["rpe_rot_deg_per_m"]                # doctest: +SKIP
+This is the layer under :mod:`dmtrack.experiments` (which runs many of these) and :mod:`dmtrack.api` (the public
+facade that re-exports :func:`track`, :func:`track_many`, :func:`run_to_directory` and :class:`RunResult`).
 
 :func:`track` runs the odometry and returns a :class:`RunResult`; :func:`run_to_directory` also writes the
 files of ``dmtrack run`` (``trajectory.txt``, ``keyframes.txt``, ``pointcloud.ply``, ``depth/``,
@@ -26,18 +25,64 @@ import numpy as np
 
 from dmtrack import __version__
 from dmtrack.datasets.base import Sequence
-from dmtrack.errors import DmtrackError, InputError
+from dmtrack.errors import DmtrackError, InputError, Interrupted, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
-from dmtrack.io.trajectory import Trajectory, _atomic_write
+from dmtrack.io.atomic import prepare_folder, write_text
+from dmtrack.io.trajectory import Trajectory
+from dmtrack.odometry._fastmath import kernel_target
 from dmtrack.odometry.config import VOConfig
-from dmtrack.odometry.sink import MultiSink, OutputSink
+from dmtrack.odometry.sink import OutputSink
 from dmtrack.odometry.vo import VisualOdometry, VOResult
+from dmtrack.outputs.memory import MultiSink
 
 #: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
 R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
 DEFAULT_R_L = 1.0 / 3.0
 #: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one).
 PREFETCH = 2
+
+
+class _StopBetweenFrames:
+    """While tracking: Ctrl-C (SIGINT) and SIGTERM stop the run *between* frames, never in the middle of one.
+
+    Only signals whose current handler raises (Python's Ctrl-C handler; the CLI's SIGTERM handler) are wrapped;
+    default and ignored dispositions are left alone. The first signal is remembered and the loop stops after the
+    frame in progress; :meth:`exception` is then what the original handler raises (KeyboardInterrupt,
+    :class:`~dmtrack.errors.Interrupted`). A second signal acts at once through the original handler.
+    """
+
+    def __enter__(self) -> _StopBetweenFrames:
+        import signal
+        import threading
+
+        self.pending: int | None = None
+        self._old: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, getattr(signal, "SIGTERM", None)):
+                if sig is not None and callable(old := signal.getsignal(sig)):
+                    self._old[sig] = old
+                    signal.signal(sig, self._handler)
+        return self
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        if self.pending is not None:
+            self._old[signum](signum, frame)
+        self.pending = signum
+
+    def exception(self) -> BaseException | None:
+        if self.pending is None:
+            return None
+        try:
+            self._old[self.pending](self.pending, None)
+        except BaseException as e:  # noqa: BLE001 - this is the exception the handler wants raised
+            return e
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
 
 
 @dataclass
@@ -56,6 +101,10 @@ class RunResult:
         ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
     metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
     vo : the odometry's own summary.
+    halted_by : why the run stopped before its last frame other than a tracking loss — an interrupt
+        (:class:`KeyboardInterrupt`, :class:`~dmtrack.errors.Interrupted` for SIGTERM) or an output that could
+        not be written (:class:`~dmtrack.errors.OutputError`); ``None`` for a run that went to its end.
+        :func:`track` and :func:`run_to_directory` re-raise it once the finished frames are saved.
     """
 
     trajectory: Trajectory
@@ -68,6 +117,7 @@ class RunResult:
     timings_ms: dict[str, float]
     metrics: dict[str, Any] = field(default_factory=dict)
     vo: VOResult | None = None
+    halted_by: BaseException | None = None
 
 
 def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | None) -> Sequence:
@@ -116,21 +166,34 @@ def track(
     InputError
         Bad sequence, missing intrinsics, bad arguments.
     """
+    result = _track(
+        sequence, feature, config, start=start, max_frames=max_frames, seed=seed, sink=sink, format=format,
+        intrinsics=intrinsics, r_l=r_l, progress=progress,
+    )
+    _raise_halt([result])
+    return result
+
+
+def _track(
+    sequence: str | Path | Sequence,
+    feature: Any = "gray",
+    config: VOConfig | None = None,
+    *,
+    seed: int | None = None,
+    sink: OutputSink | None = None,
+    **kwargs: Any,
+) -> RunResult:
+    """:func:`track` without re-raising ``halted_by`` (the caller saves what was finished first)."""
     config = config or VOConfig()
     if seed is not None:
         config = config.with_overrides(f"seed={int(seed)}")
-    return track_many(
-        sequence,
-        feature,
-        [config],
-        start=start,
-        max_frames=max_frames,
-        sinks=[sink],
-        format=format,
-        intrinsics=intrinsics,
-        r_l=r_l,
-        progress=progress,
-    )[0]
+    return _track_many(sequence, feature, [config], sinks=[sink], **kwargs)[0]
+
+
+def _raise_halt(results: list[RunResult]) -> None:
+    for r in results:
+        if r.halted_by is not None:
+            raise r.halted_by
 
 
 def track_many(
@@ -155,7 +218,33 @@ def track_many(
 
     ``configs`` give the seeds (``config.seed``); ``energy_channels`` and ``info_channels`` left ``None`` are
     filled in with the feature's measured values. ``sinks`` (optional) pairs one sink with each configuration.
+    The other arguments are those of :func:`track`.
+
+    An interrupt (Ctrl-C, SIGTERM) or an output error stops every odometry; their sinks are closed (finished
+    frames reach disk) and the interrupt or error is raised.
     """
+    results = _track_many(
+        sequence, feature, configs, start=start, max_frames=max_frames, sinks=sinks, format=format,
+        intrinsics=intrinsics, r_l=r_l, progress=progress,
+    )
+    _raise_halt(results)
+    return results
+
+
+def _track_many(
+    sequence: str | Path | Sequence,
+    feature: Any,
+    configs: list[VOConfig],
+    *,
+    start: int = 0,
+    max_frames: int | None = None,
+    sinks: list[OutputSink | None] | None = None,
+    format: str | None = None,
+    intrinsics: str | None = None,
+    r_l: float | None = None,
+    progress: bool | None = False,
+) -> list[RunResult]:
+    """:func:`track_many` without re-raising ``halted_by``."""
     if not configs:
         raise InputError("track_many needs at least one configuration")
     if sinks is None:
@@ -217,6 +306,8 @@ def track_many(
     pending: deque[Future] = deque()
     nxt = start
     results: list[VOResult] = []
+    halted_by: BaseException | None = None
+    stops = _StopBetweenFrames().__enter__()
     try:
         for i in range(start, stop):
             while nxt < stop and len(pending) <= PREFETCH:
@@ -233,14 +324,24 @@ def track_many(
                 bar.set_postfix_str(f"kf {vos[0].n_keyframes}", refresh=False)
             if all(vo.stopped for vo in vos):
                 break
+            if stops.pending is not None:
+                break
+    except (KeyboardInterrupt, OutputError) as e:  # stop here; what is finished is saved, then e is re-raised
+        halted_by = e
     finally:
         for fut in pending:
             fut.cancel()
         pool.shutdown(wait=True)
         for vo in vos:
-            results.append(vo.finish())  # closes the sink: finished results reach disk even on an error
+            try:
+                vo.finish()  # closes the sink: finished results reach disk even on an error
+            except OutputError as e:  # e.g. the point cloud on a full disk: keep the poses, report the file
+                halted_by = halted_by or e
+            results.append(vo.result())
         if bar is not None:
             bar.close()
+        stops.__exit__()
+        halted_by = halted_by or stops.exception()
     wall = time.perf_counter() - t_start
 
     if r_l is None:
@@ -272,6 +373,7 @@ def track_many(
             lost_reason=vo_result.lost[0][1] if vo_result.lost else None,
             timings_ms=timings,
             vo=vo_result,
+            halted_by=halted_by,
         )
         result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
         out.append(result)
@@ -309,6 +411,12 @@ def _finite(x: float | None) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _interrupt_name(e: BaseException | None) -> str | None:
+    if isinstance(e, Interrupted):
+        return e.signal_name
+    return "SIGINT" if isinstance(e, KeyboardInterrupt) else None
+
+
 def metrics_dict(
     result: RunResult,
     seq: Sequence,
@@ -335,6 +443,9 @@ def metrics_dict(
         "tracked_frames": int(result.tracked_frames),
         "lost_at": None if result.lost_at is None else int(result.lost_at),
         "lost_reason": result.lost_reason,
+        "processed_frames": int(processed),
+        "interrupted": _interrupt_name(result.halted_by),
+        "output_error": str(result.halted_by) if isinstance(result.halted_by, OutputError) else None,
         "fps": _finite(processed / t["wall_s"]) if t["wall_s"] > 0 else None,
         "feature_ms": t["feature"] + t["pyramid"],
         "tracking_ms": t["tracking"],
@@ -354,6 +465,7 @@ def metrics_dict(
         "info_channels": _finite(config.info_channels),
         "r_l": r_l,
         "dmtrack_version": __version__,
+        **kernel_target(),
     }
     gt = seq.groundtruth
     if gt is not None:
@@ -388,21 +500,27 @@ def run_to_directory(
     extra_sinks: tuple[OutputSink, ...] = (),
     **kwargs: Any,
 ) -> RunResult:
-    """:func:`track` writing the run's files into ``out_dir`` (see :mod:`dmtrack.io.run_outputs`)."""
+    """:func:`track` writing the run's files into ``out_dir`` (see :mod:`dmtrack.outputs.run_directory`)."""
     import yaml
 
-    from dmtrack.io.run_outputs import RunDirectorySink
+    from dmtrack.outputs.run_directory import RunDirectorySink
 
-    out = Path(out_dir)
+    out = prepare_folder(out_dir)  # before any frame: an --out that is a file fails here, in one line
     (out / "metrics.json").unlink(missing_ok=True)  # a stale metrics.json must not describe this run
     config = config or VOConfig()
     if kwargs.get("seed") is not None:
         config = config.with_overrides(f"seed={int(kwargs.pop('seed'))}")
-    out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / "config.yaml", yaml.safe_dump(_plain(config.to_dict()), sort_keys=False))
+    write_text(out / "config.yaml", yaml.safe_dump(_plain(config.to_dict()), sort_keys=False))
     files = RunDirectorySink(out, depth_images=depth_images, pointcloud=pointcloud)
     sink: OutputSink = MultiSink(files, *extra_sinks) if extra_sinks else files
-    result = track(sequence, feature, config, sink=sink, **kwargs)
+    result = _track(sequence, feature, config, sink=sink, **kwargs)
     result.metrics["points"] = files.n_points
-    _atomic_write(out / "metrics.json", json.dumps(result.metrics, indent=2) + "\n")
+    # an interrupted run or one whose point cloud could not be written still gets the metrics of its frames
+    try:
+        write_text(out / "metrics.json", json.dumps(result.metrics, indent=2) + "\n")
+    except OutputError:
+        if result.halted_by is None:
+            raise
+        # the run already stopped on an output error (a full disk): that first error is the one to report
+    _raise_halt([result])
     return result

@@ -9,8 +9,9 @@ import pytest
 from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
 from dmtrack.errors import InputError
 from dmtrack.odometry.config import KeyframeConfig, VOConfig
-from dmtrack.odometry.sink import MemorySink, MultiSink, OutputSink
+from dmtrack.odometry.sink import OutputSink
 from dmtrack.odometry.vo import VisualOdometry, keyframe_score
+from dmtrack.outputs.memory import MemorySink, MultiSink
 
 N_FRAMES = 40
 CAMERA = SyntheticConfig(width=320, height=240).camera()

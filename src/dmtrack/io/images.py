@@ -16,13 +16,22 @@ from dmtrack.errors import InputError
 
 def _imread(path: Path, flags: int) -> np.ndarray:
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError("image file not found", path=path)
-    # np.fromfile + imdecode also handles non-ASCII paths.
-    data = np.fromfile(path, dtype=np.uint8)
+    if path.is_dir():
+        raise InputError("image file expected, but this is a folder", path=path)
+    # reading the bytes + imdecode also handles non-ASCII paths.
+    try:
+        with open(path, "rb") as f:
+            data = np.frombuffer(f.read(), dtype=np.uint8)
+    except OSError as e:
+        raise InputError(f"cannot read the image ({e.strerror or e})", path=path) from None
     if data.size == 0:
         raise InputError("image file is empty", path=path)
-    image = cv2.imdecode(data, flags)
+    try:
+        image = cv2.imdecode(data, flags)
+    except cv2.error:  # e.g. a header announcing more pixels than OpenCV accepts
+        image = None
     if image is None:
         raise InputError("cannot decode image (corrupt or unsupported format)", path=path)
     return image

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from dmtrack.io.atomic import atomic_path
 
 
 def write_ply(path: str | Path, points: np.ndarray, colours: np.ndarray | None = None) -> None:
@@ -26,11 +27,8 @@ def write_ply(path: str | Path, points: np.ndarray, colours: np.ndarray | None =
     vertex["x"], vertex["y"], vertex["z"] = points.T
     if colours is not None:
         vertex["red"], vertex["green"], vertex["blue"] = colours.T
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    PlyData([PlyElement.describe(vertex, "vertex")], text=False, byte_order="<").write(str(tmp))
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        PlyData([PlyElement.describe(vertex, "vertex")], text=False, byte_order="<").write(str(tmp))
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray | None]:

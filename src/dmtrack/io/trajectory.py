@@ -15,17 +15,63 @@ Readers are lenient about what is harmless and strict about what is not:
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.lie import matrix_to_quaternion, quaternion_to_matrix
+from dmtrack.io.atomic import write_text
 
 _ROTATION_TOL = 1e-2  # max |RᵀR − I| entry accepted as a rotation (files print ~7 digits)
+
+
+# -- text files ----------------------------------------------------------------------------------
+def check_file(path: str | Path, what: str) -> Path:
+    """``path`` if it is an existing file; else an :class:`InputError` saying that the ``what`` is missing or is a
+    folder."""
+    path = Path(path)
+    try:
+        is_dir, exists = path.is_dir(), path.exists()
+    except OSError as e:  # e.g. a parent folder that may not be searched
+        raise InputError(f"cannot read the {what} ({e.strerror or e})", path=path) from None
+    if is_dir:
+        raise InputError(f"{what} expected, but this is a folder", path=path)
+    if not exists:
+        raise InputError(f"{what} not found", path=path)
+    return path
+
+
+def read_text_file(path: str | Path, what: str) -> str:
+    """The text of ``path`` (UTF-8, a byte-order mark is skipped), or an :class:`InputError` naming the file.
+
+    ``what`` names the kind of file in the messages (``"TUM trajectory"``, ``"calibration file"``, …).  A missing
+    file, a folder, an unreadable file (permissions, I/O error) and a file that is not UTF-8 text (binary data, a
+    NUL byte, another encoding such as UTF-16) each give one clear line instead of a traceback.
+    """
+    path = check_file(path, what)
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise InputError(f"cannot read the {what} ({e.strerror or e})", path=path) from None
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise InputError(f"not a text {what} (NUL byte at byte {nul}: not a text file)", path=path)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InputError(
+            f"not a text {what} ({e.reason} at byte {e.start}: not a text file, or not UTF-8)", path=path
+        ) from None
+
+
+def _number(value: Any) -> str:
+    """A number as plain text (``1.5``, not ``np.float64(1.5)``)."""
+    v = float(value)
+    return str(int(v)) if v.is_integer() and abs(v) < 1e16 else repr(v)
 
 
 class Trajectory:
@@ -168,15 +214,10 @@ def _parse_rows(path: Path, ncols: tuple[int, ...], what: str) -> tuple[np.ndarr
     Returns (rows (M, ncols), 1-based line numbers (M,), index of each row among all data lines (M,),
     number of data lines including the NaN ones).
     """
-    if not path.is_file():
-        raise InputError(f"{what} file not found", path=path)
+    text = read_text_file(path, "trajectory")
     rows: list[list[float]] = []
     lines: list[int] = []
     width = None
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as e:
-        raise InputError(f"not a text file ({e.reason} at byte {e.start})", path=path) from None
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].replace(",", " ").strip()
         if not line:
@@ -230,8 +271,10 @@ def _is_float(s: str) -> bool:
 
 
 def _check_rotations(R: np.ndarray, path: Path, linenos: np.ndarray) -> None:
-    err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(R)
+    with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308 overflow: not a rotation either way
+        err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(R)
+    err = np.where(np.isfinite(err), err, np.inf)
     bad = (err > _ROTATION_TOL) | (det < 0)
     if bad.any():
         i = int(np.argmax(bad))
@@ -250,10 +293,11 @@ def read_tum(path: str | Path) -> Trajectory:
     """
     path = Path(path)
     data, linenos, _, _ = _parse_rows(path, (8,), "TUM trajectory")
-    norms = np.linalg.norm(data[:, 4:8], axis=1)
-    if (norms < 1e-8).any():
-        i = int(np.argmax(norms < 1e-8))
+    size = np.abs(data[:, 4:8]).max(axis=1)  # not the norm: that overflows for entries near 1e308
+    if (size < 1e-8).any():
+        i = int(np.argmax(size < 1e-8))
         raise InputError("TUM trajectory: zero quaternion", path=path, line=int(linenos[i]))
+    data[:, 4:8] /= size[:, None]
     order = np.argsort(data[:, 0], kind="stable")
     if (np.diff(order) != 1).any():
         warnings.warn(f"{path}: timestamps are not in increasing order; sorted them", stacklevel=2)
@@ -261,7 +305,8 @@ def read_tum(path: str | Path) -> Trajectory:
     dup = np.flatnonzero(np.diff(data[:, 0]) == 0)
     if dup.size:
         raise InputError(
-            f"TUM trajectory: duplicate timestamp {data[dup[0], 0]!r}", path=path, line=int(linenos[dup[0] + 1])
+            f"TUM trajectory: duplicate timestamp {_number(data[dup[0], 0])}", path=path,
+            line=int(linenos[dup[0] + 1]),
         )
     return Trajectory.from_tum_array(data)
 
@@ -291,7 +336,7 @@ def read_kitti(path: str | Path, timestamps: np.ndarray | str | Path | None = No
 
 def _data_lines(path: Path) -> list[str]:
     out = []
-    for raw in path.read_text(encoding="utf-8").splitlines():
+    for raw in read_text_file(path, "trajectory").splitlines():
         line = raw.split("#", 1)[0].strip()
         if line:
             out.append(line)
@@ -301,18 +346,19 @@ def _data_lines(path: Path) -> list[str]:
 def read_times(path: str | Path) -> np.ndarray:
     """Read a KITTI / TUM-monoVO style ``times.txt``: one timestamp per line (first column)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError("timestamps file not found", path=path)
     out = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "timestamps file").splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
         first = line.replace(",", " ").split()[0]
         try:
-            out.append(float(first))
+            t = float(first)
         except ValueError:
             raise InputError(f"cannot read timestamp {first!r}", path=path, line=lineno) from None
+        if not math.isfinite(t):
+            raise InputError(f"timestamp {first!r} is not a finite number", path=path, line=lineno)
+        out.append(t)
     if not out:
         raise InputError("no timestamps in the file", path=path)
     return np.asarray(out)
@@ -325,7 +371,7 @@ def read_trajectory(path: str | Path, format: str | None = None, times: str | Pa
     """
     path = Path(path)
     if format is None:
-        data_lines = _data_lines(path) if path.is_file() else []
+        data_lines = _data_lines(path) if path.exists() else []
         n = len(data_lines[0].replace(",", " ").split()) if data_lines else 8
         format = "kitti" if n == 12 else "tum"
     if format == "tum":
@@ -336,33 +382,31 @@ def read_trajectory(path: str | Path, format: str | None = None, times: str | Pa
 
 
 # -- writing -------------------------------------------------------------------------------------
-def _atomic_write(path: Path, text: str) -> None:
-    """Write via a temporary file and rename, so a killed process never leaves half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def tum_row_text(timestamp: float, values: Any) -> str:
+    """One TUM line without its newline: ``%.6f`` timestamp, ``%.9g`` for tx ty tz qx qy qz qw (byte-repeatable)."""
+    return f"{timestamp:.6f} " + " ".join(f"{v:.9g}" for v in values)
+
+
+def tum_line(timestamp: float, T_wc: np.ndarray) -> str:
+    """The TUM line (with newline) of one 4×4 camera-to-world pose, formatted like :func:`format_tum`."""
+    q = matrix_to_quaternion(T_wc[:3, :3])
+    return tum_row_text(timestamp, (*T_wc[:3, 3], *q)) + "\n"
 
 
 def format_tum(traj: Trajectory, header: str | None = None) -> str:
     """The TUM text of a trajectory (``%.6f`` timestamps, ``%.9g`` numbers — repeatable to the byte)."""
     lines = [] if header is None else [f"# {h}" for h in header.splitlines()]
     for row in traj.to_tum_array():
-        lines.append(f"{row[0]:.6f} " + " ".join(f"{v:.9g}" for v in row[1:]))
+        lines.append(tum_row_text(row[0], row[1:]))
     return "\n".join(lines) + "\n"
 
 
 def write_tum(path: str | Path, traj: Trajectory, header: str | None = None) -> None:
     """Write ``timestamp tx ty tz qx qy qz qw`` lines (atomically)."""
-    _atomic_write(Path(path), format_tum(traj, header))
+    write_text(Path(path), format_tum(traj, header))
 
 
 def write_kitti(path: str | Path, traj: Trajectory) -> None:
     """Write 3×4 row-major pose lines (atomically); timestamps are not stored in this format."""
     lines = [" ".join(f"{v:.9e}" for v in pose[:3, :4].reshape(-1)) for pose in traj.poses]
-    _atomic_write(Path(path), "\n".join(lines) + "\n")
+    write_text(Path(path), "\n".join(lines) + "\n")

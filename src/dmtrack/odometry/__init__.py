@@ -8,7 +8,7 @@ and the :class:`OutputSink` protocol.
 from dmtrack.odometry.config import DepthConfig, KeyframeConfig, TrackerConfig, VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import Frame, Level, build_frame
-from dmtrack.odometry.sink import KeyframeSnapshot, MemorySink, MultiSink, OutputSink
+from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
 from dmtrack.odometry.tracker import ReferenceLevel, Tracker, TrackingReference, TrackResult
 from dmtrack.odometry.vo import FrameResult, KeyframeRecord, VisualOdometry, VOResult, keyframe_score
 
@@ -21,8 +21,6 @@ __all__ = [
     "KeyframeRecord",
     "KeyframeSnapshot",
     "Level",
-    "MemorySink",
-    "MultiSink",
     "OutputSink",
     "ReferenceLevel",
     "TrackResult",

@@ -9,3 +9,27 @@ references up to rounding.
 """
 
 FASTMATH = frozenset({"reassoc", "contract", "arcp", "nsz"})
+
+
+def kernel_target() -> dict[str, str]:
+    """What the numba kernels are compiled for on this machine: the reproducibility key of multichannel runs.
+
+    ``kernel_target`` is LLVM's CPU name (``NUMBA_CPU_NAME`` when set, e.g. ``generic``), ``simd`` the widest vector
+    instruction set it has (avx512 / avx2 / avx / sse4.2 / neon / baseline) and ``cpu`` the processor's model name.
+    Two machines with the same ``kernel_target`` run the same machine code, so every feature's trajectory is
+    byte-identical there; across targets only grey (scalar arithmetic) is, because the re-associated channel sums
+    above are vectorised to the target's width and round differently.
+    """
+    import os
+
+    import llvmlite.binding as ll
+
+    from dmtrack.io.machine import cpu_model
+
+    name = os.environ.get("NUMBA_CPU_NAME") or ll.get_host_cpu_name()
+    if os.environ.get("NUMBA_CPU_NAME"):
+        features = set((os.environ.get("NUMBA_CPU_FEATURES") or "").replace("+", " ").replace(",", " ").split())
+    else:
+        features = {k for k, v in ll.get_host_cpu_features().items() if v}
+    simd = next((s for s in ("avx512f", "avx2", "avx", "sse4.2", "neon") if s in features), "baseline")
+    return {"kernel_target": name, "simd": simd.removesuffix("f"), "cpu": cpu_model()}

@@ -1,7 +1,7 @@
 """Output sinks of the visual odometry: where poses, keyframes and tracking losses go.
 
 :class:`~dmtrack.odometry.vo.VisualOdometry` calls an :class:`OutputSink` (any object with these four
-methods; file, PLY and depth-image writers live elsewhere):
+methods):
 
 * ``on_frame`` once per tracked frame, in frame order, with the camera-to-world pose T_wc (SE(3), world units);
 * ``on_keyframe`` once per keyframe, when its depth map is final — i.e. when the next keyframe replaces it, and
@@ -9,13 +9,14 @@ methods; file, PLY and depth-image writers live elsewhere):
 * ``on_lost`` when tracking of a frame is lost (diverged, or not good after the first keyframes);
 * ``close`` once at the end.
 
-Also here: :class:`MemorySink` (records everything; handy in tests and notebooks) and :class:`MultiSink`
-(fans out to several sinks).
+The protocol and the snapshot type belong to the odometry (it calls them); the sinks themselves — the run-folder
+writer, :class:`~dmtrack.outputs.memory.MemorySink`, :class:`~dmtrack.outputs.memory.MultiSink` — live in
+:mod:`dmtrack.outputs`, a layer above, so the odometry never imports a writer or a viewer.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -123,62 +124,3 @@ class OutputSink(Protocol):
 
     def close(self) -> None:
         """No more calls follow."""
-
-
-@dataclass
-class MemorySink:
-    """Records every call (poses are copied)."""
-
-    frames: list[tuple[int, float, np.ndarray]] = field(default_factory=list)
-    keyframes: list[KeyframeSnapshot] = field(default_factory=list)
-    lost: list[tuple[int, str]] = field(default_factory=list)
-    closed: bool = False
-
-    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
-        self.frames.append((int(frame_index), float(timestamp), np.array(T_wc, dtype=np.float64)))
-
-    def on_keyframe(
-        self,
-        keyframe_id: int,
-        frame_index: int,
-        timestamp: float,
-        T_wc: np.ndarray,
-        depthmap_snapshot: KeyframeSnapshot,
-    ) -> None:
-        self.keyframes.append(depthmap_snapshot)
-
-    def on_lost(self, frame_index: int, reason: str) -> None:
-        self.lost.append((int(frame_index), str(reason)))
-
-    def close(self) -> None:
-        self.closed = True
-
-
-class MultiSink:
-    """Forwards every call to each of ``sinks`` in order."""
-
-    def __init__(self, *sinks: OutputSink):
-        self.sinks = list(sinks)
-
-    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
-        for s in self.sinks:
-            s.on_frame(frame_index, timestamp, T_wc)
-
-    def on_keyframe(
-        self,
-        keyframe_id: int,
-        frame_index: int,
-        timestamp: float,
-        T_wc: np.ndarray,
-        depthmap_snapshot: KeyframeSnapshot,
-    ) -> None:
-        for s in self.sinks:
-            s.on_keyframe(keyframe_id, frame_index, timestamp, T_wc, depthmap_snapshot)
-
-    def on_lost(self, frame_index: int, reason: str) -> None:
-        for s in self.sinks:
-            s.on_lost(frame_index, reason)
-
-    def close(self) -> None:
-        for s in self.sinks:
-            s.close()

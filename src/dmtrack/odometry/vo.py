@@ -514,17 +514,19 @@ class VisualOdometry:
         """
         if not self._finished:
             self._finished = True
-            if self._dm is not None and self._kf is not None:
-                prev = numba.get_num_threads()
-                if self.threads is not None:
-                    numba.set_num_threads(self.threads)
-                try:
-                    self._dm.finalize()
-                finally:
-                    numba.set_num_threads(prev)
-                self._emit_keyframe(self._kf_id, self._kf, self._dm)
-            if self.sink is not None:
-                self.sink.close()
+            try:
+                if self._dm is not None and self._kf is not None:
+                    prev = numba.get_num_threads()
+                    if self.threads is not None:
+                        numba.set_num_threads(self.threads)
+                    try:
+                        self._dm.finalize()
+                    finally:
+                        numba.set_num_threads(prev)
+                    self._emit_keyframe(self._kf_id, self._kf, self._dm)
+            finally:
+                if self.sink is not None:
+                    self.sink.close()  # also when emitting the last keyframe failed: flush what is finished
         return self.result()
 
     def result(self) -> VOResult:

@@ -5,30 +5,54 @@
                        line by line and flushed, so a killed run keeps every frame it finished.
 ``keyframes.txt``      the same for the keyframes (appended when each keyframe's depth map is final).
 ``pointcloud.ply``     semi-dense points of all keyframes in the world frame, coloured by the image
-                       (written when the run closes, also after a tracking loss or an interrupt).
+                       (written atomically when the run closes, also after a tracking loss or an interrupt).
 ``depth/``             one picture per keyframe: inverse depth over the dimmed image, negative inverse
-                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`).
-``metrics.json``       written by the caller (:func:`dmtrack.api.run_to_directory`), not by the sink.
+                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically.
+``metrics.json``       written by the caller (:func:`dmtrack.pipeline.run_to_directory`), not by the sink.
 =====================  =====================================================================================
+
+A file that cannot be written (disk full, read-only folder) raises :class:`~dmtrack.errors.OutputError` naming it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
-from dmtrack.geometry.lie import matrix_to_quaternion
+from dmtrack.errors import OutputError
+from dmtrack.io.atomic import prepare_folder, remove_stale_temporaries
 from dmtrack.io.ply import write_ply
+from dmtrack.io.trajectory import tum_line
 from dmtrack.odometry.sink import KeyframeSnapshot
 from dmtrack.viz.depth import inverse_depth_image, write_png
 
+TUM_HEADER = "# timestamp tx ty tz qx qy qz qw  (camera-to-world, TUM format)\n"
 
-def tum_line(timestamp: float, T_wc: np.ndarray) -> str:
-    """One TUM line; the same formatting as :func:`dmtrack.io.trajectory.format_tum` (byte-repeatable)."""
-    q = matrix_to_quaternion(T_wc[:3, :3])
-    values = (*T_wc[:3, 3], *q)
-    return f"{timestamp:.6f} " + " ".join(f"{v:.9g}" for v in values) + "\n"
+
+class _LineFile:
+    """A text file written line by line and flushed after each line; OS errors name the file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            self._f: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115
+        except OSError as exc:
+            raise OutputError(f"cannot write: {exc.strerror or exc}", path, exc.errno) from None
+
+    def write(self, text: str) -> None:
+        try:
+            self._f.write(text)
+            self._f.flush()
+        except OSError as exc:
+            raise OutputError(f"cannot write: {exc.strerror or exc}", self.path, exc.errno) from None
+
+    def close(self) -> None:
+        try:
+            self._f.close()
+        except OSError as exc:
+            raise OutputError(f"cannot write: {exc.strerror or exc}", self.path, exc.errno) from None
 
 
 class RunDirectorySink:
@@ -49,21 +73,21 @@ class RunDirectorySink:
         pointcloud: bool = True,
         max_point_var: float | None = None,
     ) -> None:
-        self.out_dir = Path(out_dir)
-        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.out_dir = prepare_folder(out_dir)
+        remove_stale_temporaries(self.out_dir)
         self.depth_dir = self.out_dir / "depth"
         self.depth_images = depth_images
         self.pointcloud = pointcloud
         self.max_point_var = max_point_var
         if depth_images:
-            self.depth_dir.mkdir(exist_ok=True)
+            prepare_folder(self.depth_dir)
+            remove_stale_temporaries(self.depth_dir)
             for old in self.depth_dir.glob("kf_*.png"):
                 old.unlink()
-        self._traj = open(self.out_dir / "trajectory.txt", "w", encoding="utf-8")  # noqa: SIM115
-        self._kfs = open(self.out_dir / "keyframes.txt", "w", encoding="utf-8")  # noqa: SIM115
-        header = "# timestamp tx ty tz qx qy qz qw  (camera-to-world, TUM format)\n"
-        self._traj.write(header)
-        self._kfs.write(header)
+        self._traj = _LineFile(self.out_dir / "trajectory.txt")
+        self._kfs = _LineFile(self.out_dir / "keyframes.txt")
+        self._traj.write(TUM_HEADER)
+        self._kfs.write(TUM_HEADER)
         self._points: list[np.ndarray] = []
         self._colours: list[np.ndarray] = []
         self.n_frames = 0
@@ -73,7 +97,6 @@ class RunDirectorySink:
 
     def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
         self._traj.write(tum_line(timestamp, T_wc))
-        self._traj.flush()
         self.n_frames += 1
 
     def on_keyframe(
@@ -86,7 +109,6 @@ class RunDirectorySink:
     ) -> None:
         snap = depthmap_snapshot
         self._kfs.write(tum_line(timestamp, T_wc))
-        self._kfs.flush()
         self.n_keyframes += 1
         if self.pointcloud:
             pts, cols = snap.points_world(self.max_point_var)
@@ -100,15 +122,25 @@ class RunDirectorySink:
         self.lost.append((frame_index, reason))
 
     def close(self) -> None:
+        """Close the line files, then write the point cloud (every step is tried; the first error is raised)."""
         if self._closed:
             return
         self._closed = True
-        self._traj.close()
-        self._kfs.close()
+        errors: list[OutputError] = []
+        for f in (self._traj, self._kfs):
+            try:
+                f.close()
+            except OutputError as e:
+                errors.append(e)
         if self.pointcloud:
             pts = np.concatenate(self._points) if self._points else np.zeros((0, 3), np.float32)
             cols = np.concatenate(self._colours) if self._colours else np.zeros((0, 3), np.uint8)
-            write_ply(self.out_dir / "pointcloud.ply", pts, cols)
+            try:
+                write_ply(self.out_dir / "pointcloud.ply", pts, cols)
+            except OutputError as e:
+                errors.append(e)
+        if errors:
+            raise errors[0]
 
     @property
     def n_points(self) -> int:

@@ -53,9 +53,10 @@ def inverse_depth_image(
 
 
 def write_png(path, image_rgb: np.ndarray) -> None:  # noqa: ANN001
-    """Write an RGB uint8 image as PNG (OpenCV wants BGR)."""
-    from pathlib import Path
+    """Write an RGB uint8 image as PNG (OpenCV wants BGR), atomically."""
+    from dmtrack.io.atomic import write_bytes
 
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"{path}: cannot write the image")
+    ok, data = cv2.imencode(".png", cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError(f"{path}: OpenCV cannot encode this image as PNG ({image_rgb.shape}, {image_rgb.dtype})")
+    write_bytes(path, data.tobytes())

@@ -29,9 +29,11 @@ def _figure(width: float, height: float) -> Any:
 
 
 def _save(fig: Any, path: str | Path) -> Path:
+    from dmtrack.io.atomic import atomic_open
+
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=DPI)
+    with atomic_open(p, "wb") as f:
+        fig.savefig(f, dpi=DPI, format=p.suffix.lstrip(".").lower() or None)
     return p
 
 

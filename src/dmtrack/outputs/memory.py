@@ -1,0 +1,68 @@
+"""In-memory sinks: :class:`MemorySink` records every call (tests, notebooks); :class:`MultiSink` fans out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
+
+
+@dataclass
+class MemorySink:
+    """Records every call (poses are copied)."""
+
+    frames: list[tuple[int, float, np.ndarray]] = field(default_factory=list)
+    keyframes: list[KeyframeSnapshot] = field(default_factory=list)
+    lost: list[tuple[int, str]] = field(default_factory=list)
+    closed: bool = False
+
+    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        self.frames.append((int(frame_index), float(timestamp), np.array(T_wc, dtype=np.float64)))
+
+    def on_keyframe(
+        self,
+        keyframe_id: int,
+        frame_index: int,
+        timestamp: float,
+        T_wc: np.ndarray,
+        depthmap_snapshot: KeyframeSnapshot,
+    ) -> None:
+        self.keyframes.append(depthmap_snapshot)
+
+    def on_lost(self, frame_index: int, reason: str) -> None:
+        self.lost.append((int(frame_index), str(reason)))
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class MultiSink:
+    """Forwards every call to each of ``sinks`` in order."""
+
+    def __init__(self, *sinks: OutputSink):
+        self.sinks = list(sinks)
+
+    def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
+        for s in self.sinks:
+            s.on_frame(frame_index, timestamp, T_wc)
+
+    def on_keyframe(
+        self,
+        keyframe_id: int,
+        frame_index: int,
+        timestamp: float,
+        T_wc: np.ndarray,
+        depthmap_snapshot: KeyframeSnapshot,
+    ) -> None:
+        for s in self.sinks:
+            s.on_keyframe(keyframe_id, frame_index, timestamp, T_wc, depthmap_snapshot)
+
+    def on_lost(self, frame_index: int, reason: str) -> None:
+        for s in self.sinks:
+            s.on_lost(frame_index, reason)
+
+    def close(self) -> None:
+        for s in self.sinks:
+            s.close()

@@ -214,6 +214,16 @@ def test_pca_name_needs_basis() -> None:
         get_feature("nothing-pca8")
 
 
+def test_pca_variants_are_the_fitted_bases(monkeypatch, tmp_path) -> None:
+    monkeypatch.setenv("DMTRACK_HOME", str(tmp_path))
+    assert base.pca_variants() == []
+    folder = base.user_pca_path("dsift", 8).parent
+    folder.mkdir(parents=True)
+    for name in ("dsift-pca8.npz", "gray-pca1.npz", "nothing-pca3.npz", "dsift.npz", "dsift-pca2.txt"):
+        (folder / name).write_bytes(b"")
+    assert base.pca_variants() == ["dsift-pca8", "gray-pca1"]
+
+
 def test_listing_does_not_import_torch() -> None:
     """In a fresh interpreter (other tests of this process import torch): listing and core features stay torch-free."""
     import subprocess

@@ -18,6 +18,7 @@ import pytest
 from dmtrack.errors import InputError
 from dmtrack.features import _caffe
 from dmtrack.features import weights as W
+from dmtrack.features.weights import torchfile
 
 SHIPPED = {"tfeat": "tfeat-liberty.params", "disk": "disk-depth-save.pth"}
 
@@ -256,6 +257,15 @@ def test_cli_list_and_download_error(isolated, monkeypatch, capsys):
     assert "offline" in capsys.readouterr().err
 
 
+def test_cli_runs_as_a_module(isolated):
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-m", "dmtrack.features.weights", "list"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "tfeat" in res.stdout and "siam_liberty.bin" in res.stdout and not res.stderr
+
+
 # ------------------------------------------------------------------------------------------ torch files
 def test_torch_reader_reads_shipped_weights_without_torch():
     sd = W.load_tfeat()
@@ -304,7 +314,7 @@ def test_torch_reader_handles_views_strides_and_dtypes(tmp_path, zipped):
 def test_torch_reader_refuses_arbitrary_objects(tmp_path):
     path = tmp_path / "evil.pth"
     with open(path, "wb") as f:
-        for part in (W._LEGACY_MAGIC, 1001, {"little_endian": True}):
+        for part in (torchfile._LEGACY_MAGIC, 1001, {"little_endian": True}):
             pickle.dump(part, f, protocol=2)
         pickle.dump(collections.Counter(a=1), f, protocol=2)  # a class that is not a tensor or container
     with pytest.raises(InputError, match="refusing to load collections.Counter"):

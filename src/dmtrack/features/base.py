@@ -12,8 +12,10 @@ when the feature is built, so entries that need PyTorch (``needs_torch=True``) c
 :func:`list_features` never imports torch.
 
 Names of the form ``BASE-pcaK`` (e.g. ``alexnet-pca8``) build a PCA-reduced ``BASE`` with K channels
-(:class:`dmtrack.features.pca.ReducedFeature`); they need a basis (``pca=`` a :class:`PcaBasis` or a ``.npz``
-path written by :meth:`PcaBasis.save`).
+(:class:`dmtrack.features.pca.ReducedFeature`, through the string factory :data:`PCA_FACTORY`, so that this
+module does not import :mod:`dmtrack.features.pca`, which builds on it); they need a basis (``pca=`` a
+:class:`PcaBasis` or a ``.npz`` path written by :meth:`PcaBasis.save`, else one fitted into the user's PCA folder;
+:func:`pca_variants` lists the ``BASE-pcaK.npz`` ones).
 
 Plug-ins: after the built-in entries, the registry imports the modules named in :data:`PLUGIN_MODULES` if they
 exist (``dmtrack.features.learned``).  Such a module must not import torch at import time; it calls
@@ -48,6 +50,7 @@ import cv2
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.io.atomic import write_text
 
 PyramidPolicy = Literal["downsample", "recompute"]
 _PYRAMID_POLICIES: tuple[str, ...] = get_args(PyramidPolicy)
@@ -57,6 +60,9 @@ PLUGIN_MODULES: tuple[str, ...] = ("dmtrack.features.learned",)
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.]*(?:-[a-z0-9_.]+)*$")
 _PCA_RE = re.compile(r"^(?P<base>.+)-pca(?P<k>[0-9]+)$")
+#: Factory of the PCA-reduced features ``BASE-pcaK``, imported when one is built, like every string factory:
+#: ``factory(build_base, basis, k=K, scale=...)`` (:func:`dmtrack.features.pca.reduce_feature`).
+PCA_FACTORY = "dmtrack.features.pca:reduce_feature"
 
 
 # ----------------------------------------------------------------------------------------------- images
@@ -335,10 +341,7 @@ def save_user_scale(name: str, scale: float, **details: Any) -> Path:
     path = user_scales_path()
     scales = user_scales()
     scales[name] = {"scale": check_scale(scale), **details}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps({"scales": scales}, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text(path, json.dumps({"scales": scales}, indent=2) + "\n")
     return path
 
 
@@ -380,20 +383,7 @@ class FeatureEntry:
         """The factory callable (imports its module if given as a string)."""
         if not isinstance(self.factory, str):
             return self.factory
-        module_name, _, attr = self.factory.partition(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name and exc.name.split(".")[0] in ("torch", "torchvision"):
-                raise InputError(
-                    f"feature {self.name!r} needs PyTorch, which is not installed "
-                    "(pip install 'dmtrack[learned]')"
-                ) from exc
-            raise
-        try:
-            return getattr(module, attr)
-        except AttributeError:
-            raise RuntimeError(f"feature {self.name!r}: {module_name} has no attribute {attr!r}") from None
+        return _import_factory(self.factory, self.name)
 
     def default_scale(self) -> float:
         """The scale used when none is given: the packaged table's, else the registered one, else 1."""
@@ -401,6 +391,24 @@ class FeatureEntry:
         if s is None:
             s = self.scale
         return 1.0 if s is None else float(s)
+
+
+def _import_factory(factory: str, name: str) -> Callable[..., Any]:
+    """The callable named by a ``"package.module:attribute"`` string (feature ``name``, for messages)."""
+    module_name, _, attr = factory.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.split(".")[0] in ("torch", "torchvision"):
+            raise InputError(
+                f"feature {name!r} needs PyTorch, which is not installed "
+                "(pip install 'dmtrack[learned]')"
+            ) from exc
+        raise
+    try:
+        return getattr(module, attr)
+    except AttributeError:
+        raise RuntimeError(f"feature {name!r}: {module_name} has no attribute {attr!r}") from None
 
 
 _REGISTRY: dict[str, FeatureEntry] = {}
@@ -587,8 +595,6 @@ def get_feature(name: str, **options: Any) -> Feature:
     entries = _entries()
     m = _PCA_RE.match(key)
     if m is not None and key not in entries:
-        from dmtrack.features.pca import PcaBasis, ReducedFeature
-
         base_entry = get_entry(m.group("base"))
         k = int(m.group("k"))
         basis = options.pop("pca", None)
@@ -603,10 +609,8 @@ def get_feature(name: str, **options: Any) -> Feature:
                 f"feature {name!r} needs a PCA basis: none in {user_pca_path(base_entry.name, k).parent}; fit one with "
                 f"`dmtrack fit-pca --feature {base_entry.name} --k {k} SEQUENCE...` or pass pca=PATH to a .npz"
             )
-        if not isinstance(basis, PcaBasis):
-            basis = PcaBasis.load(basis)
-        base = _build(base_entry, base_scale, options)
-        return ReducedFeature(base, basis, k=k, scale=scale)
+        reduce = _import_factory(PCA_FACTORY, key)
+        return reduce(lambda: _build(base_entry, base_scale, options), basis, k=k, scale=scale)
     return _build(get_entry(key), scale, options)
 
 
@@ -619,6 +623,21 @@ def as_feature(feature: str | Feature, **options: Any) -> Feature:
     if not hasattr(feature, "compute"):
         raise InputError(f"not a feature: {feature!r}")
     return feature
+
+
+def pca_variants() -> list[str]:
+    """The ``BASE-pcaK`` names :func:`get_feature` builds without ``pca=``: those of the bases fitted for a
+    registered ``BASE`` in the user's PCA folder (``BASE-pcaK.npz``, :func:`user_pca_path`), sorted."""
+    folder = user_pca_path("").parent
+    if not folder.is_dir():
+        return []
+    entries = _entries()
+    names = []
+    for path in folder.glob("*-pca*.npz"):
+        m = _PCA_RE.match(path.stem)
+        if m is not None and m.group("base") in entries and path.is_file():
+            names.append(path.stem)
+    return sorted(names)
 
 
 def list_features() -> list[dict[str, Any]]:

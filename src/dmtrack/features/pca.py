@@ -18,7 +18,8 @@ Each component's sign is fixed (its largest-magnitude entry is positive) so a ba
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import os
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.features.base import Feature, as_feature, default_scale, iter_images
+from dmtrack.io.atomic import atomic_open
 
 _FORMAT_VERSION = 1
 
@@ -138,18 +140,19 @@ class PcaBasis:
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
-        np.savez(
-            path,
-            format_version=np.int64(_FORMAT_VERSION),
-            mean=self.mean,
-            components=self.components,
-            explained_variance=self.explained_variance,
-            total_variance=np.float64(self.total_variance),
-            feature=np.str_(self.feature),
-            feature_scale=np.float64(self.feature_scale),
-            n_samples=np.int64(self.n_samples),
-            seed=np.int64(self.seed),
-        )
+        with atomic_open(path, "wb") as f:
+            np.savez(
+                f,
+                format_version=np.int64(_FORMAT_VERSION),
+                mean=self.mean,
+                components=self.components,
+                explained_variance=self.explained_variance,
+                total_variance=np.float64(self.total_variance),
+                feature=np.str_(self.feature),
+                feature_scale=np.float64(self.feature_scale),
+                n_samples=np.int64(self.n_samples),
+                seed=np.int64(self.seed),
+            )
         return path
 
     @classmethod
@@ -327,3 +330,19 @@ class ReducedFeature(Feature):
 
     def __repr__(self) -> str:
         return f"ReducedFeature(base={self.base!r}, k={self.channels}, scale={self.scale:g})"
+
+
+def reduce_feature(
+    build_base: Callable[[], Feature],
+    basis: PcaBasis | str | os.PathLike[str],
+    k: int,
+    scale: float | None = None,
+) -> ReducedFeature:
+    """The registry's factory of ``BASE-pcaK`` (:data:`dmtrack.features.base.PCA_FACTORY`).
+
+    ``basis`` is a :class:`PcaBasis` or a ``.npz`` written by :meth:`PcaBasis.save` (read first, so that a bad
+    file is reported before the base feature is built); ``build_base()`` builds the base feature.
+    """
+    if not isinstance(basis, PcaBasis):
+        basis = PcaBasis.load(basis)
+    return ReducedFeature(build_base(), basis, k=k, scale=scale)

@@ -25,30 +25,110 @@ Two evaluation modes (``normalise=``):
     layers dilated by 3, 6 and 12, giving *exactly* the per-patch outputs of the pre-normalised image at every
     pixel for ≈0.9 M multiply-adds per pixel.  The only approximation is the normalisation (patch mean vs local
     means), which differs from ``"patch"`` where the local mean varies across the patch.
+
+The evaluation plumbing (padding, batching, backends, the feature class) is shared with the other patch
+descriptors in :mod:`dmtrack.features._dense_patch`; this module gives the network's layers (:class:`SiamNet`).
 """
 
 from __future__ import annotations
 
 import os
+from typing import Any
 
-import cv2
 import numpy as np
 
-from dmtrack.errors import InputError
 from dmtrack.features import _nn
-from dmtrack.features.base import Feature
-from dmtrack.features.weights import find_weights, load_siamese
+from dmtrack.features._dense_patch import DensePatchFeature, PatchNet, Stem, reflect_pad
 
 PATCH = 64
 #: rows/columns of the patch before and after its pixel (patch = [y - 32, y + 31]).
 BEFORE, AFTER = PATCH // 2, PATCH - PATCH // 2 - 1
 #: The paper's default feature scale for the Siamese feature (§3: 347.50).
 PAPER_SCALE = 347.5
-_MODES = ("local", "patch")
 
 
-def _pad(gray: np.ndarray, before: int, after: int) -> np.ndarray:
-    return cv2.copyMakeBorder(np.asarray(gray, np.float32), before, after, before, after, cv2.BORDER_REFLECT_101)
+class SiamNet(PatchNet):
+    """The "siam" descriptor branch for :mod:`dmtrack.features._dense_patch` (weights as from
+    :func:`~dmtrack.features.weights.load_siamese`)."""
+
+    label = "siam"
+    patch = PATCH
+    dim = 256
+    exact_grid = (6, 10)  # conv0 stride 3 × pool 2: the per-pixel layers read 10×10 pooled values 6 apart
+    exact_batch = 1024
+    exact_chunk = 64  # keep the im2col buffer small (64 × 36 × 2400 floats)
+
+    def patch_torch(self, torch: Any, t: Any, p: dict[str, Any]) -> Any:
+        f = torch.nn.functional
+        t = f.max_pool2d(f.relu(f.conv2d(t, p["conv0.weight"], p["conv0.bias"], stride=3)), 2, 2)
+        t = f.max_pool2d(f.relu(f.conv2d(t, p["conv1.weight"], p["conv1.bias"])), 2, 2)
+        return f.relu(f.conv2d(t, p["conv2.weight"], p["conv2.bias"]))
+
+    def patch_numpy(self, patch: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        x = _nn.conv2d_hwc(patch[:, :, None], params["conv0.weight"], params["conv0.bias"])[::3, ::3]
+        x = _nn.maxpool_shift(np.maximum(x, 0), 1)[::2, ::2]
+        x = _nn.conv2d_hwc(x, params["conv1.weight"], params["conv1.bias"])
+        x = _nn.maxpool_shift(np.maximum(x, 0), 1)[::2, ::2]
+        x = _nn.conv2d_hwc(x, params["conv2.weight"], params["conv2.bias"])
+        return np.maximum(x, 0).reshape(-1)
+
+    def normalise_windows(self, p: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndarray:
+        return (p - mean) / 255.0
+
+    def dense_torch(self, torch: Any, t: Any, p: dict[str, Any], params: dict[str, np.ndarray]) -> Any:
+        f = torch.nn.functional
+        t = f.relu(f.conv2d(t, p["conv0.weight"], p["conv0.bias"]))
+        t = f.max_pool2d(t, 2, stride=1, dilation=3).contiguous(memory_format=torch.channels_last)
+        t = f.relu(f.conv2d(t, p["conv1.weight"], p["conv1.bias"], dilation=6))
+        t = f.max_pool2d(t, 2, stride=1, dilation=6)
+        return f.relu(f.conv2d(t, p["conv2.weight"], p["conv2.bias"], dilation=12))
+
+    def dense_numpy(self, x: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        d1 = np.maximum(_nn.conv2d_hwc(x[:, :, None], params["conv0.weight"], params["conv0.bias"]), 0)
+        m1 = _nn.maxpool_shift(d1, 3)
+        del d1
+        d2 = np.maximum(_nn.conv2d_hwc(m1, params["conv1.weight"], params["conv1.bias"], dilation=6), 0)
+        del m1
+        m2 = _nn.maxpool_shift(d2, 6)
+        del d2
+        out = _nn.conv2d_hwc(m2, params["conv2.weight"], params["conv2.bias"], dilation=12)
+        np.maximum(out, 0, out=out)
+        return out
+
+    def exact_stem(self, gray: np.ndarray, params: dict[str, np.ndarray]) -> Stem:
+        p = reflect_pad(gray, PATCH) / np.float32(255.0)
+        offset = float(p.mean())
+        p -= offset  # centre for float32 precision; the per-patch means absorb it exactly
+        mean, _ = _nn.box_mean_std(p, PATCH)  # (H, W): mean of each pixel's patch
+        w0 = params["conv0.weight"]
+        wsum = w0.reshape(w0.shape[0], -1).sum(axis=1).astype(np.float32)
+        raw = _nn.conv2d_hwc(p[:, :, None], w0, None)  # (H+57, W+57, 96) without bias
+        rmax = _nn.maxpool_shift(raw, 3)  # (H+54, W+54, 96)
+        del raw
+        b0 = params["conv0.bias"]
+
+        def first(g: np.ndarray, pb: np.ndarray) -> np.ndarray:
+            m = mean[pb[:, 0], pb[:, 1]].astype(np.float32)
+            return np.maximum(g - m[:, None, None, None] * wsum + b0, 0).astype(np.float32)  # (B, 10, 10, 96)
+
+        return rmax, first
+
+    def tail_torch(self, torch: Any, t: Any, p: dict[str, Any]) -> Any:
+        f = torch.nn.functional
+        t = f.max_pool2d(f.relu(f.conv2d(t, p["conv1.weight"], p["conv1.bias"])), 2, 2)
+        return f.relu(f.conv2d(t, p["conv2.weight"], p["conv2.bias"]))
+
+    def tail_numpy(self, g: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        x = np.maximum(_nn.conv2d_batch_hwc(g, params["conv1.weight"], params["conv1.bias"]), 0)
+        x = np.maximum(  # 2×2 max-pool, stride 2 (6×6 → 3×3)
+            np.maximum(x[:, 0::2, 0::2], x[:, 1::2, 0::2]), np.maximum(x[:, 0::2, 1::2], x[:, 1::2, 1::2])
+        )
+        x = _nn.conv2d_batch_hwc(x, params["conv2.weight"], params["conv2.bias"])
+        return np.maximum(x, 0).reshape(len(x), -1)
+
+
+#: The network (stateless; the weights are passed to each call).
+SIAM = SiamNet()
 
 
 def siam_patches_forward(patches: np.ndarray, params: dict[str, np.ndarray], backend: str = "auto") -> np.ndarray:
@@ -68,28 +148,7 @@ def siam_patches_forward(patches: np.ndarray, params: dict[str, np.ndarray], bac
     np.ndarray
         ``(B, 256)`` float32 descriptors.
     """
-    patches = np.asarray(patches, np.float32)
-    if patches.ndim != 3 or patches.shape[1:] != (PATCH, PATCH):
-        raise InputError(f"siam patches must be (B, 64, 64), got {patches.shape}")
-    if _nn.resolve_backend(backend) == "torch":
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        p = _nn.torch_params(params)
-        with torch.inference_mode():
-            x = torch.from_numpy(np.ascontiguousarray(patches))[:, None]
-            x = f.max_pool2d(f.relu(f.conv2d(x, p["conv0.weight"], p["conv0.bias"], stride=3)), 2, 2)
-            x = f.max_pool2d(f.relu(f.conv2d(x, p["conv1.weight"], p["conv1.bias"])), 2, 2)
-            x = f.relu(f.conv2d(x, p["conv2.weight"], p["conv2.bias"]))
-            return x.reshape(x.shape[0], -1).numpy().copy()
-    out = np.empty((patches.shape[0], 256), np.float32)
-    for i, patch in enumerate(patches):
-        x = _nn.conv2d_hwc(patch[:, :, None], params["conv0.weight"], params["conv0.bias"])[::3, ::3]
-        x = _nn.maxpool_shift(np.maximum(x, 0), 1)[::2, ::2]
-        x = _nn.conv2d_hwc(x, params["conv1.weight"], params["conv1.bias"])
-        x = _nn.maxpool_shift(np.maximum(x, 0), 1)[::2, ::2]
-        x = _nn.conv2d_hwc(x, params["conv2.weight"], params["conv2.bias"])
-        out[i] = np.maximum(x, 0).reshape(-1)
-    return out
+    return SIAM.forward_patches(patches, params, backend)
 
 
 def local_normalise(gray: np.ndarray) -> np.ndarray:
@@ -101,10 +160,7 @@ def local_normalise(gray: np.ndarray) -> np.ndarray:
         ``(H + 63, W + 63)`` float32: the reflect-padded image (32 rows/columns before, 31 after), every value
         minus the mean of its own 64×64 window (same geometry as a patch), divided by 255.
     """
-    p = _pad(gray, BEFORE, AFTER)
-    pp = _pad(p, BEFORE, AFTER)
-    mean, _ = _nn.box_mean_std(pp, PATCH)
-    return ((p - mean) / 255.0).astype(np.float32)
+    return SIAM.local_normalise(gray)
 
 
 def dense_siam(x: np.ndarray, params: dict[str, np.ndarray], gain: float = 1.0, backend: str = "auto") -> np.ndarray:
@@ -126,32 +182,7 @@ def dense_siam(x: np.ndarray, params: dict[str, np.ndarray], gain: float = 1.0, 
     np.ndarray
         ``(H, W, 256)`` float32: ``out[y, x] = siam(x[y : y + 64, x : x + 64])``.
     """
-    if _nn.resolve_backend(backend) == "torch":
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        p = _nn.torch_params(params)
-        with torch.inference_mode():
-            t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None, None]
-            t = f.relu(f.conv2d(t, p["conv0.weight"], p["conv0.bias"]))
-            t = f.max_pool2d(t, 2, stride=1, dilation=3).contiguous(memory_format=torch.channels_last)
-            t = f.relu(f.conv2d(t, p["conv1.weight"], p["conv1.bias"], dilation=6))
-            t = f.max_pool2d(t, 2, stride=1, dilation=6)
-            t = f.relu(f.conv2d(t, p["conv2.weight"], p["conv2.bias"], dilation=12))
-            if gain != 1.0:
-                t.mul_(gain)
-            return np.ascontiguousarray(t[0].permute(1, 2, 0).numpy())
-    d1 = np.maximum(_nn.conv2d_hwc(x[:, :, None], params["conv0.weight"], params["conv0.bias"]), 0)
-    m1 = _nn.maxpool_shift(d1, 3)
-    del d1
-    d2 = np.maximum(_nn.conv2d_hwc(m1, params["conv1.weight"], params["conv1.bias"], dilation=6), 0)
-    del m1
-    m2 = _nn.maxpool_shift(d2, 6)
-    del d2
-    out = _nn.conv2d_hwc(m2, params["conv2.weight"], params["conv2.bias"], dilation=12)
-    np.maximum(out, 0, out=out)
-    if gain != 1.0:
-        out *= np.float32(gain)
-    return out
+    return SIAM.dense(x, params, gain, backend)
 
 
 def exact_siam(
@@ -160,7 +191,7 @@ def exact_siam(
     pixels: np.ndarray | None = None,
     gain: float = 1.0,
     backend: str = "auto",
-    batch: int = 1024,
+    batch: int = SiamNet.exact_batch,
 ) -> np.ndarray:
     """The authors' per-patch evaluation (patch mean subtracted) at every pixel or at selected pixels.
 
@@ -185,57 +216,10 @@ def exact_siam(
         ``(H, W, 256)`` for all pixels, or ``(M, 256)`` for ``pixels``; float32.  Equal (to float32 rounding) to
         :func:`siam_patches_forward` on ``patch/255 - mean(patch/255)`` of each pixel's 64×64 patch.
     """
-    gray = np.asarray(gray, np.float32)
-    h, w = gray.shape
-    p = _pad(gray, BEFORE, AFTER) / np.float32(255.0)
-    offset = float(p.mean())
-    p -= offset  # centre for float32 precision; the per-patch means absorb it exactly
-    mean, _ = _nn.box_mean_std(p, PATCH)  # (H, W): mean of each pixel's patch
-    w0 = params["conv0.weight"]
-    wsum = w0.reshape(w0.shape[0], -1).sum(axis=1).astype(np.float32)
-    raw = _nn.conv2d_hwc(p[:, :, None], w0, None)  # (H+57, W+57, 96) without bias
-    rmax = _nn.maxpool_shift(raw, 3)  # (H+54, W+54, 96)
-    del raw
-    if pixels is None:
-        rows, cols = np.mgrid[0:h, 0:w]
-        pix = np.stack([rows.ravel(), cols.ravel()], axis=1)
-    else:
-        pix = np.asarray(pixels, np.int64).reshape(-1, 2)
-        if pix.size and (pix.min() < 0 or (pix[:, 0] >= h).any() or (pix[:, 1] >= w).any()):
-            raise InputError(f"pixels must lie inside the {h}x{w} image")
-    grid = 6 * np.arange(10)
-    out = np.empty((len(pix), 256), np.float32)
-    use_torch = _nn.resolve_backend(backend) == "torch"
-    if use_torch:
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        tp = _nn.torch_params(params)
-    b0 = params["conv0.bias"]
-    for s in range(0, len(pix), batch):
-        pb = pix[s : s + batch]
-        g = rmax[pb[:, 0, None, None] + grid[None, :, None], pb[:, 1, None, None] + grid[None, None, :]]
-        m = mean[pb[:, 0], pb[:, 1]].astype(np.float32)
-        g = np.maximum(g - m[:, None, None, None] * wsum + b0, 0).astype(np.float32)  # (B, 10, 10, 96)
-        if use_torch:
-            with torch.inference_mode():
-                t = torch.from_numpy(np.ascontiguousarray(g)).permute(0, 3, 1, 2)
-                t = f.max_pool2d(f.relu(f.conv2d(t, tp["conv1.weight"], tp["conv1.bias"])), 2, 2)
-                t = f.relu(f.conv2d(t, tp["conv2.weight"], tp["conv2.bias"]))
-                out[s : s + len(pb)] = t.reshape(len(pb), -1).numpy()
-        else:
-            for i in range(0, len(pb), 64):  # keep the im2col buffer small (64 × 36 × 2400 floats)
-                x = np.maximum(_nn.conv2d_batch_hwc(g[i : i + 64], params["conv1.weight"], params["conv1.bias"]), 0)
-                x = np.maximum(  # 2×2 max-pool, stride 2 (6×6 → 3×3)
-                    np.maximum(x[:, 0::2, 0::2], x[:, 1::2, 0::2]), np.maximum(x[:, 0::2, 1::2], x[:, 1::2, 1::2])
-                )
-                x = _nn.conv2d_batch_hwc(x, params["conv2.weight"], params["conv2.bias"])
-                out[s + i : s + i + len(x)] = np.maximum(x, 0).reshape(len(x), -1)
-    if gain != 1.0:
-        out *= np.float32(gain)
-    return out.reshape(h, w, 256) if pixels is None else out
+    return SIAM.exact(gray, params, pixels, gain, backend, batch)
 
 
-class SiameseFeature(Feature):
+class SiameseFeature(DensePatchFeature):
     """Zagoruyko–Komodakis "siam" 256-D descriptor of the 64×64 patch around every pixel (paper §2.1.2).
 
     Parameters
@@ -259,6 +243,8 @@ class SiameseFeature(Feature):
     needs_weights = True
     pyramid = "downsample"
     description = "Zagoruyko-Komodakis 'siam' descriptor of the 64x64 patch at every pixel (dense), 256-D"
+    net = SIAM
+    weights_key = "siamese"
 
     def __init__(
         self,
@@ -267,15 +253,4 @@ class SiameseFeature(Feature):
         normalise: str = "local",
         backend: str = "auto",
     ) -> None:
-        super().__init__(scale)
-        if normalise not in _MODES:
-            raise InputError(f"normalise must be one of {_MODES}, got {normalise!r}")
-        self.normalise = normalise
-        self.backend = _nn.resolve_backend(backend)
-        self.weights_path = find_weights("siamese", weights)
-        self.params = load_siamese(self.weights_path)
-
-    def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
-        if self.normalise == "patch":
-            return exact_siam(image, self.params, gain=gain, backend=self.backend)
-        return dense_siam(local_normalise(image), self.params, gain, self.backend)
+        super().__init__(scale, weights, normalise, backend)

@@ -25,37 +25,113 @@ Two evaluation modes (``normalise=``):
     across the patch the descriptors differ from ``"patch"``: on real images (7-Scenes, Tsukuba crops) the
     median cosine similarity between the two modes' descriptors is 0.86–0.92 and the relative difference of the
     maps 0.44–0.62 (``tests/features/test_tfeat.py`` checks this on a sample crop).
+
+The evaluation plumbing (padding, batching, backends, the feature class) is shared with the other patch
+descriptors in :mod:`dmtrack.features._dense_patch`; this module gives the network's layers (:class:`TFeatNet`).
 """
 
 from __future__ import annotations
 
 import os
+from typing import Any
 
-import cv2
 import numpy as np
 
-from dmtrack.errors import InputError
 from dmtrack.features import _nn
-from dmtrack.features.base import Feature
-from dmtrack.features.weights import load_tfeat
+from dmtrack.features._dense_patch import DensePatchFeature, PatchNet, Stem, reflect_pad
 
 PATCH = 32
 BEFORE, AFTER = PATCH // 2, PATCH - PATCH // 2 - 1
 #: InstanceNorm2d's default epsilon (added to the biased variance).
 EPS = 1e-5
-_MODES = ("local", "patch")
 #: Default feature scale (paper §2.4), calibrated with :func:`dmtrack.features.scale.compute_default_scales` on the
 #: 20 sample frames of ``default_scales.json`` (the registry entry in :mod:`dmtrack.features.learned` repeats it).
 DEFAULT_SCALE = 29.3193
 
 
-def _pad(gray: np.ndarray, before: int, after: int) -> np.ndarray:
-    return cv2.copyMakeBorder(np.asarray(gray, np.float32), before, after, before, after, cv2.BORDER_REFLECT_101)
-
-
 def _linear_as_conv(params: dict[str, np.ndarray]) -> np.ndarray:
     """The 128×4096 linear layer as 128 kernels of 64×8×8 (PyTorch flattens (C, H, W) in C order)."""
     return params["descr.0.weight"].reshape(128, 64, 8, 8)
+
+
+class TFeatNet(PatchNet):
+    """TFeat without its InstanceNorm, for :mod:`dmtrack.features._dense_patch` (weights as from
+    :func:`~dmtrack.features.weights.load_tfeat`)."""
+
+    label = "TFeat"
+    patch = PATCH
+    dim = 128
+    window_eps = EPS
+    exact_grid = (2, 13)  # pool 2: the per-pixel layers read 13×13 pooled values 2 apart
+    exact_batch = 2048
+    exact_chunk = 128  # keep the im2col buffer small (128 × 64 × 1152 floats)
+
+    def patch_torch(self, torch: Any, t: Any, p: dict[str, Any]) -> Any:
+        f = torch.nn.functional
+        t = f.max_pool2d(torch.tanh(f.conv2d(t, p["features.1.weight"], p["features.1.bias"])), 2, 2)
+        t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"]))
+        return torch.tanh(f.linear(t.reshape(t.shape[0], -1), p["descr.0.weight"], p["descr.0.bias"]))
+
+    def patch_numpy(self, patch: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        y = np.tanh(_nn.conv2d_hwc(patch[:, :, None], params["features.1.weight"], params["features.1.bias"]))
+        y = _nn.maxpool_shift(y, 1)[::2, ::2]
+        y = np.tanh(_nn.conv2d_hwc(y, params["features.4.weight"], params["features.4.bias"]))
+        flat = np.transpose(y, (2, 0, 1)).reshape(-1)  # (C, H, W) order as torch's view()
+        return np.tanh(params["descr.0.weight"] @ flat + params["descr.0.bias"])
+
+    def normalise_windows(self, p: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndarray:
+        return (p - mean) / std
+
+    def dense_torch(self, torch: Any, t: Any, p: dict[str, Any], params: dict[str, np.ndarray]) -> Any:
+        f = torch.nn.functional
+        t = torch.tanh(f.conv2d(t, p["features.1.weight"], p["features.1.bias"]))
+        t = f.max_pool2d(t, 2, stride=1).contiguous(memory_format=torch.channels_last)
+        t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"], dilation=2))
+        lin = _nn.torch_params({"w": _linear_as_conv(params)})["w"]
+        return torch.tanh(f.conv2d(t, lin, p["descr.0.bias"], dilation=2))
+
+    def dense_numpy(self, x: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        d1 = np.tanh(_nn.conv2d_hwc(x[:, :, None], params["features.1.weight"], params["features.1.bias"]))
+        m1 = _nn.maxpool_shift(d1, 1)
+        del d1
+        d2 = np.tanh(_nn.conv2d_hwc(m1, params["features.4.weight"], params["features.4.bias"], dilation=2))
+        del m1
+        out = _nn.conv2d_hwc(d2, _linear_as_conv(params), params["descr.0.bias"], dilation=2)
+        np.tanh(out, out=out)
+        return out
+
+    def exact_stem(self, gray: np.ndarray, params: dict[str, np.ndarray]) -> Stem:
+        p = reflect_pad(gray, PATCH)
+        p -= np.float32(p.mean())  # centring changes nothing after normalisation but helps float32 precision
+        mean, std = _nn.box_mean_std(p, PATCH, EPS)  # (H, W) statistics of each pixel's patch
+        w1 = params["features.1.weight"]
+        wsum = w1.reshape(w1.shape[0], -1).sum(axis=1).astype(np.float64)
+        raw = _nn.conv2d_hwc(p[:, :, None], w1, None)  # (H+25, W+25, 32), no bias
+        rmax = _nn.maxpool_shift(raw, 1)  # (H+24, W+24, 32)
+        del raw
+        b1 = params["features.1.bias"].astype(np.float64)
+
+        def first(g: np.ndarray, pb: np.ndarray) -> np.ndarray:
+            m = mean[pb[:, 0], pb[:, 1]][:, None, None, None]
+            sd = std[pb[:, 0], pb[:, 1]][:, None, None, None]
+            return np.tanh((g - m * wsum) / sd + b1).astype(np.float32)  # (B, 13, 13, 32)
+
+        return rmax, first
+
+    def tail_torch(self, torch: Any, t: Any, p: dict[str, Any]) -> Any:
+        f = torch.nn.functional
+        t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"]))
+        return torch.tanh(f.linear(t.reshape(t.shape[0], -1), p["descr.0.weight"], p["descr.0.bias"]))
+
+    def tail_numpy(self, g: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
+        y = _nn.conv2d_batch_hwc(g, params["features.4.weight"], params["features.4.bias"])
+        np.tanh(y, out=y)
+        flat = y.transpose(0, 3, 1, 2).reshape(len(y), -1)  # (C, H, W) order as torch's view()
+        return np.tanh(flat @ params["descr.0.weight"].T + params["descr.0.bias"])
+
+
+#: The network (stateless; the weights are passed to each call).
+TFEAT = TFeatNet()
 
 
 def tfeat_patches_forward(
@@ -79,32 +155,13 @@ def tfeat_patches_forward(
     np.ndarray
         ``(B, 128)`` float32.
     """
-    x = np.asarray(patches, np.float32)
-    if x.ndim != 3 or x.shape[1:] != (PATCH, PATCH):
-        raise InputError(f"TFeat patches must be (B, 32, 32), got {x.shape}")
+    x = TFEAT.check_patches(patches)
     if instance_norm:
         xd = x.astype(np.float64)
         m = xd.mean(axis=(1, 2), keepdims=True)
         v = xd.var(axis=(1, 2), keepdims=True)
         x = ((xd - m) / np.sqrt(v + EPS)).astype(np.float32)
-    if _nn.resolve_backend(backend) == "torch":
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        p = _nn.torch_params(params)
-        with torch.inference_mode():
-            t = torch.from_numpy(np.ascontiguousarray(x))[:, None]
-            t = f.max_pool2d(torch.tanh(f.conv2d(t, p["features.1.weight"], p["features.1.bias"])), 2, 2)
-            t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"]))
-            t = torch.tanh(f.linear(t.reshape(t.shape[0], -1), p["descr.0.weight"], p["descr.0.bias"]))
-            return t.numpy().copy()
-    out = np.empty((x.shape[0], 128), np.float32)
-    for i, patch in enumerate(x):
-        y = np.tanh(_nn.conv2d_hwc(patch[:, :, None], params["features.1.weight"], params["features.1.bias"]))
-        y = _nn.maxpool_shift(y, 1)[::2, ::2]
-        y = np.tanh(_nn.conv2d_hwc(y, params["features.4.weight"], params["features.4.bias"]))
-        flat = np.transpose(y, (2, 0, 1)).reshape(-1)  # (C, H, W) order as torch's view()
-        out[i] = np.tanh(params["descr.0.weight"] @ flat + params["descr.0.bias"])
-    return out
+    return TFEAT.forward_patches(x, params, backend)
 
 
 def local_normalise(gray: np.ndarray) -> np.ndarray:
@@ -117,10 +174,7 @@ def local_normalise(gray: np.ndarray) -> np.ndarray:
         normalised with the mean and ``sqrt(biased variance + 1e-5)`` of its own 32×32 window (the geometry of a
         patch centred on it).
     """
-    p = _pad(gray, BEFORE, AFTER)
-    pp = _pad(p, BEFORE, AFTER)
-    mean, std = _nn.box_mean_std(pp, PATCH, EPS)
-    return ((p - mean) / std).astype(np.float32)
+    return TFEAT.local_normalise(gray)
 
 
 def dense_tfeat(x: np.ndarray, params: dict[str, np.ndarray], gain: float = 1.0, backend: str = "auto") -> np.ndarray:
@@ -142,30 +196,7 @@ def dense_tfeat(x: np.ndarray, params: dict[str, np.ndarray], gain: float = 1.0,
     np.ndarray
         ``(H, W, 128)`` float32: ``out[y, x] = tfeat_without_norm(x[y : y + 32, x : x + 32])``.
     """
-    lin = _linear_as_conv(params)
-    if _nn.resolve_backend(backend) == "torch":
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        p = _nn.torch_params(params)
-        with torch.inference_mode():
-            t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None, None]
-            t = torch.tanh(f.conv2d(t, p["features.1.weight"], p["features.1.bias"]))
-            t = f.max_pool2d(t, 2, stride=1).contiguous(memory_format=torch.channels_last)
-            t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"], dilation=2))
-            t = torch.tanh(f.conv2d(t, _nn.torch_params({"w": lin})["w"], p["descr.0.bias"], dilation=2))
-            if gain != 1.0:
-                t.mul_(gain)
-            return np.ascontiguousarray(t[0].permute(1, 2, 0).numpy())
-    d1 = np.tanh(_nn.conv2d_hwc(x[:, :, None], params["features.1.weight"], params["features.1.bias"]))
-    m1 = _nn.maxpool_shift(d1, 1)
-    del d1
-    d2 = np.tanh(_nn.conv2d_hwc(m1, params["features.4.weight"], params["features.4.bias"], dilation=2))
-    del m1
-    out = _nn.conv2d_hwc(d2, lin, params["descr.0.bias"], dilation=2)
-    np.tanh(out, out=out)
-    if gain != 1.0:
-        out *= np.float32(gain)
-    return out
+    return TFEAT.dense(x, params, gain, backend)
 
 
 def exact_tfeat(
@@ -174,7 +205,7 @@ def exact_tfeat(
     pixels: np.ndarray | None = None,
     gain: float = 1.0,
     backend: str = "auto",
-    batch: int = 2048,
+    batch: int = TFeatNet.exact_batch,
 ) -> np.ndarray:
     """TFeat with each pixel's own InstanceNorm (exact per-patch evaluation), at all or selected pixels.
 
@@ -199,55 +230,10 @@ def exact_tfeat(
         ``(H, W, 128)`` or ``(M, 128)`` float32, equal (to float32 rounding) to :func:`tfeat_patches_forward`
         on each pixel's 32×32 patch.
     """
-    gray = np.asarray(gray, np.float32)
-    h, w = gray.shape
-    p = _pad(gray, BEFORE, AFTER)
-    p -= np.float32(p.mean())  # centring changes nothing after normalisation but helps float32 precision
-    mean, std = _nn.box_mean_std(p, PATCH, EPS)  # (H, W) statistics of each pixel's patch
-    w1 = params["features.1.weight"]
-    wsum = w1.reshape(w1.shape[0], -1).sum(axis=1).astype(np.float64)
-    raw = _nn.conv2d_hwc(p[:, :, None], w1, None)  # (H+25, W+25, 32), no bias
-    rmax = _nn.maxpool_shift(raw, 1)  # (H+24, W+24, 32)
-    del raw
-    if pixels is None:
-        rows, cols = np.mgrid[0:h, 0:w]
-        pix = np.stack([rows.ravel(), cols.ravel()], axis=1)
-    else:
-        pix = np.asarray(pixels, np.int64).reshape(-1, 2)
-        if pix.size and (pix.min() < 0 or (pix[:, 0] >= h).any() or (pix[:, 1] >= w).any()):
-            raise InputError(f"pixels must lie inside the {h}x{w} image")
-    grid = 2 * np.arange(13)
-    b1 = params["features.1.bias"].astype(np.float64)
-    out = np.empty((len(pix), 128), np.float32)
-    use_torch = _nn.resolve_backend(backend) == "torch"
-    if use_torch:
-        torch = _nn.torch_module()
-        f = torch.nn.functional
-        tp = _nn.torch_params(params)
-    for s in range(0, len(pix), batch):
-        pb = pix[s : s + batch]
-        g = rmax[pb[:, 0, None, None] + grid[None, :, None], pb[:, 1, None, None] + grid[None, None, :]]
-        m = mean[pb[:, 0], pb[:, 1]][:, None, None, None]
-        sd = std[pb[:, 0], pb[:, 1]][:, None, None, None]
-        g = np.tanh((g - m * wsum) / sd + b1).astype(np.float32)  # (B, 13, 13, 32)
-        if use_torch:
-            with torch.inference_mode():
-                t = torch.from_numpy(np.ascontiguousarray(g)).permute(0, 3, 1, 2)
-                t = torch.tanh(f.conv2d(t, tp["features.4.weight"], tp["features.4.bias"]))
-                t = torch.tanh(f.linear(t.reshape(len(pb), -1), tp["descr.0.weight"], tp["descr.0.bias"]))
-                out[s : s + len(pb)] = t.numpy()
-        else:
-            for i in range(0, len(pb), 128):  # keep the im2col buffer small (128 × 64 × 1152 floats)
-                y = _nn.conv2d_batch_hwc(g[i : i + 128], params["features.4.weight"], params["features.4.bias"])
-                np.tanh(y, out=y)
-                flat = y.transpose(0, 3, 1, 2).reshape(len(y), -1)  # (C, H, W) order as torch's view()
-                out[s + i : s + i + len(y)] = np.tanh(flat @ params["descr.0.weight"].T + params["descr.0.bias"])
-    if gain != 1.0:
-        out *= np.float32(gain)
-    return out.reshape(h, w, 128) if pixels is None else out
+    return TFEAT.exact(gray, params, pixels, gain, backend, batch)
 
 
-class TFeatFeature(Feature):
+class TFeatFeature(DensePatchFeature):
     """TFeat 128-D descriptor of the 32×32 patch around every pixel (shipped Liberty weights).
 
     Parameters
@@ -269,6 +255,8 @@ class TFeatFeature(Feature):
     needs_weights = False
     pyramid = "downsample"
     description = "TFeat (Liberty) descriptor of the 32x32 patch at every pixel (dense), 128-D"
+    net = TFEAT
+    weights_key = "tfeat"
 
     def __init__(
         self,
@@ -277,14 +265,4 @@ class TFeatFeature(Feature):
         normalise: str = "local",
         backend: str = "auto",
     ) -> None:
-        super().__init__(scale)
-        if normalise not in _MODES:
-            raise InputError(f"normalise must be one of {_MODES}, got {normalise!r}")
-        self.normalise = normalise
-        self.backend = _nn.resolve_backend(backend)
-        self.params = load_tfeat(weights)
-
-    def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
-        if self.normalise == "patch":
-            return exact_tfeat(image, self.params, gain=gain, backend=self.backend)
-        return dense_tfeat(local_normalise(image), self.params, gain, self.backend)
+        super().__init__(scale, weights, normalise, backend)

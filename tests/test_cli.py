@@ -107,6 +107,14 @@ def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sa
     assert get_feature("rgb").scale == pytest.approx(result["scale"])  # used automatically afterwards
     assert main(["fit-pca", "--feature", "rgb", "--k", "2", str(sample_dir), "--frames", "2", "--samples", "5000"]) == 0
     assert "rgb-pca2" in capsys.readouterr().out
+    # every selectable name is listed: the fitted variant with its channels, and the BASE-pcaK pattern
+    assert main(["features", "--json"]) == 0
+    listed = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert listed["rgb-pca2"]["channels"] == 2 and listed["rgb-pca2"]["pca_of"] == "rgb"
+    assert main(["features"]) == 0
+    table = capsys.readouterr().out
+    assert any(line.split()[:2] == ["rgb-pca2", "2"] for line in table.splitlines())
+    assert "NAME-pcaK" in table and "dmtrack fit-pca" in table
     reduced = get_feature("rgb-pca2")  # found in the user's PCA folder
     assert reduced.channels == 2
 

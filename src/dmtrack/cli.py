@@ -194,6 +194,9 @@ def cmd_features(args: argparse.Namespace) -> int:
         scale = "-" if r.get("scale") is None else f"{r['scale']:.4g}"
         print(f"{r['name']:<16} {r['channels']:>4}  {scale:>8}  {r.get('pyramid', ''):<10} {needs:<14} "
               f"{r.get('description', '')}")
+    print(f"{'NAME-pcaK':<16} {'K':>4}  {'-':>8}  {'as NAME':<10} {'as NAME':<14} any name above reduced to its "
+          "first K principal components: fit a basis with `dmtrack fit-pca --feature NAME --k K SEQUENCE...`, "
+          "or pass --feature-opt pca=FILE.npz")
     return 0
 
 

@@ -641,16 +641,20 @@ def pca_variants() -> list[str]:
 
 
 def list_features() -> list[dict[str, Any]]:
-    """All registered features (without building them or importing torch).
+    """Every selectable feature name (without building them or importing torch).
+
+    The registered features, then the PCA-reduced ``BASE-pcaK`` whose basis is fitted in the user's PCA folder
+    (:func:`pca_variants`; they also have ``pca_of`` = BASE). Any other ``BASE-pcaK`` needs ``pca=FILE.npz``.
 
     Returns
     -------
     list of dict
         Keys ``name``, ``channels``, ``needs_colour``, ``needs_torch``, ``needs_weights``, ``pyramid``,
-        ``scale`` (the default scale), ``description``.
+        ``scale`` (the default scale; None for PCA variants), ``description``.
     """
+    entries = _entries()
     out = []
-    for e in _entries().values():
+    for e in entries.values():
         out.append(
             {
                 "name": e.name,
@@ -661,6 +665,24 @@ def list_features() -> list[dict[str, Any]]:
                 "pyramid": e.pyramid,
                 "scale": e.default_scale(),
                 "description": e.description,
+            }
+        )
+    for name in pca_variants():
+        m = _PCA_RE.match(name)
+        assert m is not None  # pca_variants only returns matching names
+        base = entries[m.group("base")]
+        out.append(
+            {
+                "name": name,
+                "channels": int(m.group("k")),
+                "needs_colour": base.needs_colour,
+                "needs_torch": base.needs_torch,
+                "needs_weights": base.needs_weights,
+                "pyramid": base.pyramid,
+                "scale": None,
+                "description": f"{base.name} reduced to its first {m.group('k')} principal components "
+                f"(basis {user_pca_path(base.name, int(m.group('k')))})",
+                "pca_of": base.name,
             }
         )
     return out

@@ -1,6 +1,7 @@
-"""dmtrack.evaluation: timestamp association, Umeyama alignment and trajectory error metrics.
+"""dmtrack.evaluation: Umeyama alignment, trajectory error metrics, and the bench's records, tables and report.
 
-Pure numpy; see :mod:`dmtrack.evaluation.metrics` for the definitions (the paper's §3.1 RPE).
+Alignment and metrics are pure numpy; see :mod:`dmtrack.evaluation.metrics` for the definitions (the paper's §3.1
+RPE). Timestamp association lives in :mod:`dmtrack.io.association` (the readers use it too).
 """
 
 from dmtrack.evaluation.alignment import (

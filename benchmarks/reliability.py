@@ -27,19 +27,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-PROMISES = """\
-## What is promised
-
-| promise | how | tested by |
-|---|---|---|
-| bad input gives one line naming the file and the problem | every reader and parser raises `dmtrack.errors.InputError` (file, line, reason); the CLI prints it as `dmtrack: error: …` and exits 1 | `tests/faults/test_parsers.py` (hypothesis fuzzing), `tests/faults/test_readers.py` |
-| a file appears complete or not at all | every writer goes through `dmtrack.io.atomic` (temporary file in the same folder, `os.replace` when complete, removed on any failure); OS errors become `dmtrack.errors.OutputError` naming the file | `tests/faults/test_environment.py` (ENOSPC, read-only folder) |
-| a killed run keeps every finished frame | `trajectory.txt` and `keyframes.txt` are written and flushed line by line | `tests/faults/test_signals.py` (`kill -9`) |
-| Ctrl-C / `kill` stop cleanly | SIGINT and SIGTERM are taken between frames; the finished frames' trajectory, point cloud and `metrics.json` (`"interrupted": "SIGINT"`) are written; exit status 130 / 143 | `tests/faults/test_signals.py` |
-| a full disk loses nothing already written | the run stops at the first failed write, keeps what is on disk, still writes `metrics.json` when there is room (`"output_error"` names the file) | `tests/faults/test_environment.py` |
-| a bench resumes without losing or recomputing a finished cell | each run is computed in a temporary folder and renamed into place when complete; a resumed bench skips runs whose `metrics.json` matches the requested specification | `tests/faults/test_bench_resume.py` |
-| the same input and seed give the same trajectory | no global random state; features and kernels are deterministic for any thread count; `metrics.json` records `kernel_target` / `simd` / `cpu` (multichannel sums are vectorised to the target's width, so byte-identity across machines needs the same `kernel_target`; grey is identical on every CPU) | `tests/faults/test_determinism.py`, `tests/test_run.py` |
-"""
+PROMISES = (REPO / "benchmarks" / "reliability_promises.md").read_text(encoding="utf-8")
 
 
 def run_suite(log: Path, examples: int) -> tuple[int, str, float]:

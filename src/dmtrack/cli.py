@@ -278,7 +278,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     gt = read_trajectory(args.groundtruth, args.format, times=args.times)
     est = read_trajectory(args.estimate, args.format, times=args.times)
-    result = evaluate(gt, est, max_diff=args.max_diff, r_l=args.r_l, align=args.align)
+    result = evaluate(gt, est, max_diff=args.max_diff, r_l=args.r_l, align=args.align,
+                      gt_name=args.groundtruth, est_name=args.estimate)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0

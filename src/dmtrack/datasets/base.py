@@ -286,11 +286,16 @@ class FileSequence(LoaderSequence):
         def load_image(i: int) -> np.ndarray:
             return read_image(paths[i], grey=grey)
 
+        width, height = int(size[0]), int(size[1])
+
         def load_depth(i: int) -> np.ndarray | None:
             p = depths[i] if depths is not None else None
             if p is None:
                 return None
-            return depth_reader(p) if depth_reader is not None else read_depth_png(p, depth_scale, depth_invalid)
+            d = depth_reader(p) if depth_reader is not None else read_depth_png(p, depth_scale, depth_invalid)
+            if d.shape[:2] != (height, width):
+                raise DatasetError(f"depth map is {d.shape[1]}x{d.shape[0]}, the images are {width}x{height}", path=p)
+            return d
 
         has_depth = depths is not None and any(p is not None for p in depths)
         super().__init__(

@@ -21,6 +21,7 @@ multiple of 16) unless ``undistort=False``.  Timestamps: nanoseconds → seconds
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -28,11 +29,13 @@ import numpy as np
 import yaml
 
 from dmtrack.datasets.base import FileSequence
-from dmtrack.datasets.undistort import UndistortedSequence, Undistorter
+from dmtrack.datasets.intrinsics import check_range
+from dmtrack.datasets.undistort import MAX_SIDE, UndistortedSequence, Undistorter
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.distortion import CameraModel, EquidistantModel, PinholeModel, RadTanModel
 from dmtrack.geometry.lie import quaternion_to_matrix
-from dmtrack.io.trajectory import Trajectory
+from dmtrack.io.images import read_image
+from dmtrack.io.trajectory import Trajectory, read_text_file
 
 FORMAT = "euroc"
 CAMERAS = ("cam0", "cam1")
@@ -40,7 +43,7 @@ CAMERAS = ("cam0", "cam1")
 
 def _mav_dir(path: Path) -> Path | None:
     for p in (path / "mav0", path):
-        if (p / "cam0" / "data.csv").is_file() or (p / "cam1" / "data.csv").is_file():
+        if (p / "cam0" / "data.csv").exists() or (p / "cam1" / "data.csv").exists():
             return p
     return None
 
@@ -51,17 +54,17 @@ def detect(path: Path) -> bool:
 
 def read_sensor_yaml(path: Path) -> dict[str, Any]:
     """``sensor.yaml`` (plain YAML; a leading ``%YAML:1.0`` line, as OpenCV writes, is tolerated)."""
-    if not path.is_file():
-        raise InputError("camera description not found", path=path)
-    text = path.read_text(encoding="utf-8")
+    text = read_text_file(path, "camera description")
     if text.startswith("%YAML"):
         text = text.split("\n", 1)[1] if "\n" in text else ""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
         line = getattr(getattr(e, "problem_mark", None), "line", None)
-        raise InputError(f"cannot parse YAML ({getattr(e, 'problem', e)})", path=path,
-                         line=None if line is None else line + 1) from None
+        reason = " ".join(str(getattr(e, "problem", None) or e).split())  # one line
+        raise InputError(f"cannot parse YAML ({reason})", path=path, line=None if line is None else line + 1) from None
+    except (ValueError, TypeError, OverflowError, RecursionError) as e:  # e.g. a date like 2001-02-30
+        raise InputError(f"cannot parse YAML ({type(e).__name__}: {str(e)[:80]})", path=path) from None
     if not isinstance(data, dict):
         raise InputError("expected a YAML mapping", path=path)
     return data
@@ -73,10 +76,13 @@ def _matrix(value: Any, path: Path, key: str) -> np.ndarray:
     try:
         data = np.asarray(value["data"], dtype=np.float64)
         rows, cols = int(value.get("rows", 4)), int(value.get("cols", 4))
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{key}: cannot read the matrix", path=path) from None
     if data.size != rows * cols or (rows, cols) != (4, 4):
         raise InputError(f"{key}: expected a 4×4 matrix (16 numbers), found {data.size} numbers", path=path)
+    if not np.isfinite(data).all() or np.abs(data).max() > 1e150:
+        raise InputError(f"{key}: the matrix has a value that is not a finite number (or is absurdly large)",
+                         path=path)
     T = data.reshape(4, 4)
     if not np.allclose(T[3], (0, 0, 0, 1), atol=1e-9):
         raise InputError(f"{key}: the last row must be 0 0 0 1", path=path)
@@ -97,13 +103,21 @@ def camera_from_sensor_yaml(data: dict[str, Any], path: Path) -> tuple[CameraMod
     try:
         w, h = (int(v) for v in data["resolution"])
         fu, fv, cu, cv = (float(v) for v in data["intrinsics"])
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError("resolution must be [width, height] and intrinsics [fu, fv, cu, cv]", path=path) from None
+    if not (0 < w <= MAX_SIDE and 0 < h <= MAX_SIDE):
+        raise InputError(f"resolution {w}x{h}: each side must be 1..{MAX_SIDE} pixels", path=path)
     model_name = str(data.get("camera_model", "pinhole"))
     if model_name != "pinhole":
-        raise InputError(f"camera_model {model_name!r} is not supported (pinhole)", path=path)
+        raise InputError(f"camera_model {model_name[:40]!r} is not supported (pinhole)", path=path)
     dist = str(data.get("distortion_model", "none")).lower()
-    coeffs = [float(v) for v in data.get("distortion_coefficients", []) or []]
+    raw_coeffs = data.get("distortion_coefficients", []) or []
+    try:
+        coeffs = [float(v) for v in raw_coeffs]
+    except (TypeError, ValueError, OverflowError):
+        raise InputError("distortion_coefficients must be a list of numbers", path=path) from None
+    check_range((fu, fv, cu, cv), "intrinsics", path)
+    check_range(coeffs, "distortion_coefficients", path)
     try:
         if dist in ("radial-tangential", "radtan", "plumb_bob"):
             if len(coeffs) not in (4, 5):
@@ -117,7 +131,7 @@ def camera_from_sensor_yaml(data: dict[str, Any], path: Path) -> tuple[CameraMod
         elif dist in ("none", ""):
             model = PinholeModel(fu, fv, cu, cv, w, h)
         else:
-            raise InputError(f"distortion_model {dist!r} is not supported", path=path)
+            raise InputError(f"distortion_model {dist[:40]!r} is not supported", path=path)
     except ValueError as e:
         raise InputError(f"camera parameters: {e}", path=path) from None
     return model, T_BS
@@ -125,11 +139,9 @@ def camera_from_sensor_yaml(data: dict[str, Any], path: Path) -> tuple[CameraMod
 
 def read_image_list(path: Path) -> tuple[np.ndarray, list[str]]:
     """``data.csv`` of a camera: (timestamps ns as int64, file names)."""
-    if not path.is_file():
-        raise InputError("image list not found", path=path)
     stamps: list[int] = []
     names: list[str] = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "image list").splitlines(), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -139,7 +151,10 @@ def read_image_list(path: Path) -> tuple[np.ndarray, list[str]]:
         try:
             stamps.append(int(f[0]))
         except ValueError:
-            raise InputError(f"cannot read timestamp {f[0]!r} (integer nanoseconds)", path=path, line=lineno) from None
+            raise InputError(f"cannot read timestamp {f[0][:40]!r} (integer nanoseconds)", path=path,
+                             line=lineno) from None
+        if not -(2**63) < stamps[-1] < 2**63:
+            raise InputError(f"timestamp {f[0][:40]} is out of range (64-bit nanoseconds)", path=path, line=lineno)
         names.append(f[1])
     if not names:
         raise InputError("no images listed", path=path)
@@ -150,7 +165,7 @@ def read_groundtruth_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """``state_groundtruth_estimate0/data.csv`` → (timestamps ns int64 (M,), body poses T_RB (M, 4, 4))."""
     stamps: list[int] = []
     rows: list[list[float]] = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "ground-truth file").splitlines(), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -159,19 +174,24 @@ def read_groundtruth_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
             raise InputError(f"expected at least 8 fields 'timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z', "
                              f"found {len(f)}", path=path, line=lineno)
         try:
-            stamps.append(int(f[0]))
+            stamp = int(f[0])
             rows.append([float(x) for x in f[1:8]])
         except ValueError:
             raise InputError(f"cannot read {line[:60]!r} as numbers", path=path, line=lineno) from None
+        if not -(2**63) < stamp < 2**63:
+            raise InputError(f"timestamp {f[0][:40]} is out of range (64-bit nanoseconds)", path=path, line=lineno)
+        if not all(math.isfinite(v) and abs(v) < 1e150 for v in rows[-1]):
+            raise InputError("a value is not a finite number (or is absurdly large)", path=path, line=lineno)
+        stamps.append(stamp)
     if not rows:
         raise InputError("no ground-truth rows", path=path)
     data = np.asarray(rows)
     q_wxyz = data[:, 3:7]
-    norms = np.linalg.norm(q_wxyz, axis=1)
+    norms = np.abs(q_wxyz).max(axis=1)
     if (norms < 1e-8).any():
         raise InputError("zero quaternion", path=path)
     T = np.tile(np.eye(4), (data.shape[0], 1, 1))
-    T[:, :3, :3] = quaternion_to_matrix(q_wxyz[:, [1, 2, 3, 0]])  # w x y z → x y z w
+    T[:, :3, :3] = quaternion_to_matrix(q_wxyz[:, [1, 2, 3, 0]] / norms[:, None])  # w x y z → x y z w
     T[:, :3, 3] = data[:, :3]
     t = np.asarray(stamps, dtype=np.int64)
     order = np.argsort(t, kind="stable")
@@ -199,6 +219,9 @@ def open_euroc(
     root = Path(path)
     mav = _mav_dir(root) if root.is_dir() else None
     if mav is None:
+        for cam_dir in (root / "mav0" / camera, root / camera):
+            if cam_dir.is_dir():  # the layout is there, its image list is not
+                raise DatasetError("image list not found", path=cam_dir / "data.csv")
         raise DatasetError("not a EuRoC sequence (needs mav0/cam0/data.csv)", path=root)
     if camera not in CAMERAS:
         raise DatasetError(f"unknown EuRoC camera {camera!r} (cam0 or cam1)", path=root)
@@ -207,16 +230,20 @@ def open_euroc(
     images = [cam_dir / "data" / n for n in names]
     for p in (images[0], images[-1]):
         if not p.is_file():
-            raise DatasetError("image listed in data.csv not found", path=p)
+            raise DatasetError("image listed in data.csv " + ("is a folder" if p.is_dir() else "not found"), path=p)
     yaml_path = cam_dir / "sensor.yaml"
     model, T_BS = camera_from_sensor_yaml(read_sensor_yaml(yaml_path), yaml_path)
+    first = read_image(images[0], grey=True)  # before building undistortion maps for the size sensor.yaml claims
+    if (first.shape[1], first.shape[0]) != (model.width, model.height):
+        raise InputError(f"resolution is {model.width}x{model.height}, {images[0].name} is "
+                         f"{first.shape[1]}x{first.shape[0]}", path=yaml_path)
     t0 = stamps_ns[0]
     timestamps = stamps_ns.astype(np.float64) * 1e-9
     details: dict[str, Any] = {"camera": camera, "T_BS": T_BS.round(12).tolist()}
 
     poses = None
     gt_path = mav / "state_groundtruth_estimate0" / "data.csv"
-    if gt_path.is_file():
+    if gt_path.exists():
         gt_ns, T_RB = read_groundtruth_csv(gt_path)
         # interpolate in seconds relative to the first image (keeps float64 precision)
         gt = Trajectory((gt_ns - t0).astype(np.float64) * 1e-9, T_RB)

@@ -26,6 +26,7 @@ recovers a trajectory whose y coordinates are the negatives of the released ones
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,7 @@ import numpy as np
 from dmtrack.datasets.base import FileSequence
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import read_tum
+from dmtrack.io.trajectory import check_file, read_text_file, read_tum
 
 FORMAT = "icl-nuim"
 FPS = 30.0
@@ -53,7 +54,7 @@ def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
     ids: list[float] = []
     depth: list[str] = []
     rgb: list[str] = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "association file").splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -64,7 +65,9 @@ def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
         try:
             t_d, t_r = float(f[0]), float(f[2])
         except ValueError:
-            raise InputError(f"cannot read the ids of {line!r}", path=path, line=lineno) from None
+            raise InputError(f"cannot read the ids of {line[:80]!r}", path=path, line=lineno) from None
+        if not (math.isfinite(t_d) and math.isfinite(t_r)):
+            raise InputError("the ids must be finite numbers", path=path, line=lineno)
         if t_d != t_r:
             raise InputError(f"depth id {f[0]} and colour id {f[2]} differ", path=path, line=lineno)
         ids.append(t_r)
@@ -77,7 +80,7 @@ def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
 
 def _groundtruth_file(root: Path) -> Path | None:
     cands = sorted(root.glob("*.gt.freiburg")) + [root / "groundtruth.txt"]
-    return next((p for p in cands if p.is_file()), None)
+    return next((p for p in cands if p.exists()), None)
 
 
 def mirror_poses(poses: np.ndarray) -> np.ndarray:
@@ -94,12 +97,15 @@ def open_iclnuim(path: str | Path, mirror_y: bool = True) -> FileSequence:
     """
     root = Path(path)
     if not detect(root):
+        if root.is_dir() and (root / "rgb").is_dir():
+            check_file(root / "associations.txt", "association file")
         raise DatasetError("not an ICL-NUIM sequence (needs associations.txt and rgb/)", path=root)
     ids, depth_names, rgb_names = read_associations(root / "associations.txt")
     images = [root / n for n in rgb_names]
     for p in (images[0], images[-1]):
         if not p.is_file():
-            raise DatasetError("image listed in associations.txt not found", path=p)
+            raise DatasetError("image listed in associations.txt " + ("is a folder" if p.is_dir() else "not found"),
+                               path=p)
     depth_paths = [root / n for n in depth_names]
     details: dict = {"intrinsics_source": "ICL-NUIM (fx 481.20, fy -480.00 made positive, cx 319.5, cy 239.5)",
                      "timestamps": "id / 30"}
@@ -126,7 +132,7 @@ def open_iclnuim(path: str | Path, mirror_y: bool = True) -> FileSequence:
         timestamps=ids / FPS,
         camera=CAMERA,
         poses=poses,
-        depth_paths=[p if p.is_file() else None for p in depth_paths],
+        depth_paths=[p if p.exists() else None for p in depth_paths],
         depth_scale=DEPTH_SCALE,
         size=(WIDTH, HEIGHT),
         details=details,

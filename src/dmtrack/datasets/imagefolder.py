@@ -41,8 +41,9 @@ def _natural_key(path: Path) -> list:
 
 
 def list_images(folder: Path) -> list[Path]:
-    return sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file()),
-                  key=_natural_key)
+    """The images of ``folder`` in natural name order (an entry with an image name that is not a readable image —
+    a folder, say — stays in the list, so that reading its frame names it)."""
+    return sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS), key=_natural_key)
 
 
 def image_dir(root: Path) -> Path | None:
@@ -84,7 +85,7 @@ def open_image_folder(path: str | Path, fps: float | None = None, max_gt_diff: f
         details["intrinsics_source"] = intr.name
 
     times_path = root / "times.txt"
-    if times_path.is_file():
+    if times_path.exists():
         timestamps = read_times(times_path)
         if timestamps.shape[0] != len(images):
             raise InputError(f"{timestamps.shape[0]} timestamps for {len(images)} images in {folder}",
@@ -98,7 +99,7 @@ def open_image_folder(path: str | Path, fps: float | None = None, max_gt_diff: f
         details["timestamps"] = "frame index"
 
     poses = None
-    gt_path = next((root / n for n in GROUNDTRUTH_FILES if (root / n).is_file()), None)
+    gt_path = next((root / n for n in GROUNDTRUTH_FILES if (root / n).exists()), None)
     if gt_path is not None:
         gt = read_tum(gt_path)
         ia, ib = associate(timestamps, gt.timestamps, max_gt_diff)

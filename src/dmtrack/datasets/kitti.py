@@ -20,10 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from dmtrack.datasets.base import FileSequence
+from dmtrack.datasets.intrinsics import check_range
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.images import read_image
-from dmtrack.io.trajectory import read_kitti, read_times
+from dmtrack.io.trajectory import read_kitti, read_text_file, read_times
 
 FORMAT = "kitti"
 CAMERAS = ("image_0", "image_1", "image_2", "image_3")
@@ -56,10 +57,8 @@ def detect(path: Path) -> bool:
 
 def read_calib(path: Path) -> dict[str, np.ndarray]:
     """The ``KEY: 12 numbers`` rows of a KITTI ``calib.txt`` as 3×4 matrices."""
-    if not path.is_file():
-        raise InputError("KITTI calibration file not found", path=path)
     out: dict[str, np.ndarray] = {}
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "KITTI calibration file").splitlines(), start=1):
         line = raw.strip()
         if not line:
             continue
@@ -69,9 +68,12 @@ def read_calib(path: Path) -> dict[str, np.ndarray]:
         try:
             values = np.asarray([float(v) for v in rest.split()])
         except ValueError:
-            raise InputError(f"cannot read the numbers of {key.strip()!r}", path=path, line=lineno) from None
+            raise InputError(f"cannot read the numbers of {key.strip()[:40]!r}", path=path, line=lineno) from None
         if values.size != 12:
-            raise InputError(f"{key.strip()}: expected 12 numbers (3×4), found {values.size}", path=path, line=lineno)
+            raise InputError(f"{key.strip()[:40]}: expected 12 numbers (3×4), found {values.size}", path=path,
+                             line=lineno)
+        if not np.isfinite(values).all():
+            raise InputError(f"{key.strip()[:40]}: a value is not a finite number", path=path, line=lineno)
         out[key.strip()] = values.reshape(3, 4)
     return out
 
@@ -103,12 +105,16 @@ def open_kitti(path: str | Path, camera_folder: str | None = None) -> FileSequen
     if key not in calib:
         raise InputError(f"no {key} row for {camera}", path=seq_dir / "calib.txt")
     P = calib[key]
-    fx, fy, cx, cy = P[0, 0], P[1, 1], P[0, 2], P[1, 2]
+    fx, fy, cx, cy = (float(v) for v in (P[0, 0], P[1, 1], P[0, 2], P[1, 2]))
+    check_range((fx, fy, cx, cy), f"{key} intrinsics", seq_dir / "calib.txt")
     first = read_image(images[0], grey=cam_idx < 2)
-    cam = PinholeCamera(fx, fy, cx, cy, first.shape[1], first.shape[0])
+    try:
+        cam = PinholeCamera(fx, fy, cx, cy, first.shape[1], first.shape[0])
+    except ValueError as e:
+        raise InputError(f"{key}: {e}", path=seq_dir / "calib.txt") from None
 
     times_path = seq_dir / "times.txt"
-    if times_path.is_file():
+    if times_path.exists():
         timestamps = read_times(times_path)
         if timestamps.shape[0] != len(images):
             raise InputError(f"{timestamps.shape[0]} timestamps for {len(images)} images", path=times_path)
@@ -117,7 +123,7 @@ def open_kitti(path: str | Path, camera_folder: str | None = None) -> FileSequen
 
     poses = None
     pose_path = seq_dir.parent.parent / "poses" / f"{seq_dir.name}.txt"
-    if pose_path.is_file():
+    if pose_path.exists():
         gt = read_kitti(pose_path)  # timestamps = line index of each (non-NaN) pose
         rows = gt.timestamps.astype(int)
         if rows[-1] + 1 != len(images):
@@ -125,7 +131,13 @@ def open_kitti(path: str | Path, camera_folder: str | None = None) -> FileSequen
         poses = np.full((len(images), 4, 4), np.nan)
         poses[rows] = gt.poses
         # camera i sits at t_i = K⁻¹ P_i[:, 3] in camera 0's frame, with the same rotation.
-        t_i = np.linalg.solve(P[:, :3], P[:, 3]) - np.linalg.solve(calib["P0"][:, :3], calib["P0"][:, 3])
+        if "P0" not in calib:
+            raise InputError(f"no P0 row: the ground truth is camera 0's and cannot be moved to {camera}",
+                             path=seq_dir / "calib.txt")
+        try:
+            t_i = np.linalg.solve(P[:, :3], P[:, 3]) - np.linalg.solve(calib["P0"][:, :3], calib["P0"][:, 3])
+        except np.linalg.LinAlgError:
+            raise InputError(f"{key} or P0: the left 3×3 block is singular", path=seq_dir / "calib.txt") from None
         if np.any(t_i != 0):
             offset = np.eye(4)
             offset[:3, 3] = -t_i

@@ -42,6 +42,11 @@ def _calibration(root: Path) -> Path | None:
     return None
 
 
+def _any_calibration(root: Path) -> Path | None:
+    """The first calibration name that exists at all (a folder of that name is reported as such when opening)."""
+    return next((root / n for n in CALIBRATION_FILES if (root / n).exists()), None)
+
+
 def detect(path: Path) -> bool:
     return path.is_dir() and _calibration(path) is not None and image_dir(path) is not None
 
@@ -58,9 +63,10 @@ def open_lsdslam(path: str | Path, fps: float = DEFAULT_FPS, undistort: bool = T
     root = Path(path)
     if not root.is_dir():
         raise DatasetError("not a folder", path=root)
-    cfg = _calibration(root)
+    cfg = _calibration(root) or _any_calibration(root)
     if cfg is None:
-        raise DatasetError(f"no LSD-SLAM calibration file ({', '.join(CALIBRATION_FILES)})", path=root)
+        raise DatasetError(f"LSD-SLAM calibration file not found (nor {', '.join(CALIBRATION_FILES[1:])})",
+                           path=root / CALIBRATION_FILES[0])
     folder = image_dir(root)
     if folder is None:
         raise DatasetError("no images in the folder or in images/", path=root)
@@ -74,7 +80,7 @@ def open_lsdslam(path: str | Path, fps: float = DEFAULT_FPS, undistort: bool = T
             path=cfg,
         )
     times = root / "times.txt"
-    if times.is_file():
+    if times.exists():
         timestamps = read_times(times)
         if timestamps.shape[0] != len(images):
             raise InputError(f"{timestamps.shape[0]} timestamps for {len(images)} images", path=times)

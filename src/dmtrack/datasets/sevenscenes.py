@@ -18,6 +18,7 @@ from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_file
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
+from dmtrack.io.trajectory import read_text_file
 
 FORMAT = "7scenes"
 FPS = 30.0
@@ -37,15 +38,19 @@ def read_pose_file(path: Path) -> np.ndarray:
     The stored rotation blocks are not quite orthonormal (KinectFusion's matrices are scaled by
     ~0.9997); they are projected to the nearest rotation (SVD), which moves no entry by more than 1e-3.
     """
+    fields = read_text_file(path, "pose file").replace(",", " ").split()
     try:
-        values = np.loadtxt(path, dtype=np.float64)
-    except (ValueError, OSError) as e:
-        raise InputError(f"cannot read a 4×4 pose matrix ({e})", path=path) from None
+        values = np.asarray([float(f) for f in fields], dtype=np.float64)
+    except ValueError:
+        bad = next(f for f in fields if not _is_number(f))
+        raise InputError(f"cannot read {bad[:40]!r} of the 4×4 pose matrix as a number", path=path) from None
     if values.size != 16:
         raise InputError(f"expected a 4×4 pose matrix (16 numbers), found {values.size}", path=path)
     pose = values.reshape(4, 4)
     if not np.isfinite(pose).all():
         return np.full((4, 4), np.nan)
+    if np.abs(pose).max() > 1e150:
+        raise InputError("the pose matrix has absurdly large values", path=path)
     if not np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0), atol=1e-6):
         raise InputError("the last row of the pose matrix must be 0 0 0 1", path=path)
     u, sv, vt = np.linalg.svd(pose[:3, :3])
@@ -53,6 +58,14 @@ def read_pose_file(path: Path) -> np.ndarray:
         raise InputError(f"not a rotation (singular values {np.round(sv, 4).tolist()})", path=path)
     pose[:3, :3] = u @ vt
     return pose
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def open_7scenes(path: str | Path) -> FileSequence:
@@ -72,13 +85,13 @@ def open_7scenes(path: str | Path) -> FileSequence:
     have_pose = False
     for i, (n, _) in enumerate(frames):
         pose_path = root / f"frame-{n:06d}.pose.txt"
-        if pose_path.is_file():
+        if pose_path.exists():
             poses[i] = read_pose_file(pose_path)
             have_pose = True
     depth_paths: list[Path | None] = []
     for n, _ in frames:
         d = root / f"frame-{n:06d}.depth.png"
-        depth_paths.append(d if d.is_file() else None)
+        depth_paths.append(d if d.exists() else None)
     intr = find_intrinsics_file(root, ("camera-intrinsics.txt", "camera.txt", "intrinsics.txt"))
     camera = DEFAULT_CAMERA if intr is None else read_intrinsics_file(intr, WIDTH, HEIGHT)
     seq = FileSequence(

@@ -47,6 +47,7 @@ from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.imagefolder import list_images
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
+from dmtrack.io.trajectory import check_file, read_text_file
 
 FORMAT = "tsukuba"
 ILLUMINATIONS = ("daylight", "fluorescent", "lamps", "flashlight")
@@ -92,10 +93,8 @@ def euler_to_matrix(a_deg: np.ndarray, b_deg: np.ndarray, c_deg: np.ndarray) -> 
 
 def read_camera_track(path: Path) -> np.ndarray:
     """``camera_track.txt`` → (N, 6) ``X Y Z A B C`` (cm, degrees)."""
-    if not path.is_file():
-        raise InputError("camera track not found", path=path)
     rows = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "camera track").splitlines(), start=1):
         line = raw.strip()
         if not line:
             continue
@@ -105,9 +104,11 @@ def read_camera_track(path: Path) -> np.ndarray:
         try:
             vals = [float(f) for f in fields]
         except ValueError:
-            raise InputError(f"cannot read {line!r} as numbers", path=path, line=lineno) from None
+            raise InputError(f"cannot read {line[:80]!r} as numbers", path=path, line=lineno) from None
         if not all(math.isfinite(v) for v in vals):
             raise InputError("non-finite value", path=path, line=lineno)
+        if not all(abs(v) < 1e150 for v in vals):
+            raise InputError("absurdly large value", path=path, line=lineno)
         rows.append(vals)
     if not rows:
         raise InputError("no poses in the file", path=path)
@@ -133,17 +134,40 @@ def track_to_poses(track: np.ndarray, offset_x: float = 0.0, scale: float = 1.0)
 
 
 def _read_depth_xml(path: Path, scale: float) -> np.ndarray:
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    check_file(path, "depth map")
+    if path.stat().st_size == 0:
+        raise InputError("depth map file is empty", path=path)
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as e:  # OpenCV raises on a file it cannot parse (SystemError wraps cv2.error)
+        raise InputError(f"cannot read the depth map (OpenCV XML expected): {_cv_message(e)}", path=path) from None
     try:
         if not fs.isOpened():
             raise InputError("cannot open the depth map (OpenCV XML expected)", path=path)
         node = fs.getFirstTopLevelNode()
         mat = None if node.empty() else node.mat()
+    except (cv2.error, SystemError) as e:
+        raise InputError(f"cannot read the depth map (OpenCV XML expected): {_cv_message(e)}", path=path) from None
     finally:
         fs.release()
-    if mat is None:
+    if mat is None or mat.ndim < 2 or mat.size == 0:
         raise InputError("no matrix in the depth map file", path=path)
-    return (mat.astype(np.float32) * np.float32(scale)).reshape(mat.shape[:2])
+    if mat.ndim == 3:
+        mat = mat[:, :, 0]
+    return mat.astype(np.float32) * np.float32(scale)
+
+
+def _cv_message(e: Exception) -> str:
+    """The one-line reason of an OpenCV exception (its text spans several lines and names OpenCV's sources)."""
+    inner = e if isinstance(e, cv2.error) else (e.__cause__ or e.__context__)
+    if isinstance(inner, cv2.error):
+        text = str(getattr(inner, "msg", "") or inner)
+        m = re.search(r"error: \((-?\d+):([^)]*)\) (.*)", text, re.DOTALL)
+        text = f"{m.group(2)}: {m.group(3)}" if m else text
+    else:
+        text = str(e)
+    text = " ".join(text.split())
+    return text if len(text) <= 160 else text[:159] + "…"
 
 
 def open_tsukuba(
@@ -202,7 +226,7 @@ def open_tsukuba(
     depth_xml = None
     if depth_dir.is_dir():
         depth_xml = [depth_dir / f"tsukuba_depth_{side}_{n:05d}.xml" for n in frame_no]
-        depth_xml = [d if d.is_file() else None for d in depth_xml]
+        depth_xml = [d if d.exists() else None for d in depth_xml]
         if not any(d is not None for d in depth_xml):
             depth_xml = None
     return FileSequence(

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import re
 import zipfile
+import zlib
 from pathlib import Path
 
 import cv2
@@ -43,6 +44,7 @@ from dmtrack.datasets.undistort import Undistorter, read_calibration_file
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.lie import quaternion_to_matrix
 from dmtrack.io.images import read_image
+from dmtrack.io.trajectory import check_file, read_text_file
 
 FORMAT = "tum-monovo"
 _IMAGE_EXT = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
@@ -64,10 +66,8 @@ def _natural_key(name: str) -> list:
 
 def read_times_file(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``times.txt``: ``id timestamp [exposure]`` lines → (ids, timestamps s, exposures ms or NaN)."""
-    if not path.is_file():
-        raise InputError("timestamps file not found", path=path)
     ids, stamps, expo = [], [], []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "timestamps file").splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -79,7 +79,9 @@ def read_times_file(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             stamps.append(float(f[1]))
             expo.append(float(f[2]) if len(f) > 2 else math.nan)
         except ValueError:
-            raise InputError(f"cannot read {line!r} as 'id timestamp exposure'", path=path, line=lineno) from None
+            raise InputError(f"cannot read {line[:80]!r} as 'id timestamp exposure'", path=path, line=lineno) from None
+        if not math.isfinite(stamps[-1]):
+            raise InputError(f"timestamp {f[1]!r} is not a finite number", path=path, line=lineno)
     if not ids:
         raise InputError("no timestamps in the file", path=path)
     return np.asarray(ids), np.asarray(stamps), np.asarray(expo)
@@ -91,10 +93,12 @@ def read_groundtruth_sync(path: Path) -> tuple[np.ndarray, np.ndarray]:
     Rows with NaN (no motion capture) are skipped silently — they are the normal case in this file.
     """
     stamps, poses = [], []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    lines = 0
+    for lineno, raw in enumerate(read_text_file(path, "ground-truth file").splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
+        lines += 1
         f = line.replace(",", " ").split()
         if len(f) != 8:
             raise InputError(f"expected 8 numbers 'timestamp tx ty tz qx qy qz qw', found {len(f)}",
@@ -102,17 +106,22 @@ def read_groundtruth_sync(path: Path) -> tuple[np.ndarray, np.ndarray]:
         try:
             v = [float(x) for x in f]
         except ValueError:
-            raise InputError(f"cannot read {line!r} as numbers", path=path, line=lineno) from None
+            raise InputError(f"cannot read {line[:80]!r} as numbers", path=path, line=lineno) from None
         if any(math.isnan(x) for x in v[1:]):
             continue
+        if not all(math.isfinite(x) for x in v):
+            raise InputError("infinite or NaN value", path=path, line=lineno)
         q = np.asarray(v[4:8])
-        if not np.linalg.norm(q) > 1e-8:
+        size = np.abs(q).max()
+        if not size > 1e-8:
             raise InputError("zero quaternion", path=path, line=lineno)
         T = np.eye(4)
-        T[:3, :3] = quaternion_to_matrix(q / np.linalg.norm(q))
+        T[:3, :3] = quaternion_to_matrix(q / size)
         T[:3, 3] = v[1:4]
         stamps.append(v[0])
         poses.append(T)
+    if not lines:
+        raise InputError("no lines in the ground-truth file", path=path)
     if not stamps:
         return np.zeros(0), np.zeros((0, 4, 4))
     return np.asarray(stamps), np.asarray(poses)
@@ -120,12 +129,14 @@ def read_groundtruth_sync(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def read_pcalib(path: Path) -> np.ndarray:
     """Inverse response ``G`` (≥ 256 strictly increasing values) rescaled to 0..255, as DSO."""
-    text = path.read_text(encoding="utf-8").splitlines()
+    text = read_text_file(path, "photometric calibration").splitlines()
     first = text[0] if text else ""
     try:
         G = np.asarray([float(x) for x in first.split()])
     except ValueError:
         raise InputError("photometric calibration: cannot read the numbers", path=path, line=1) from None
+    if not np.isfinite(G).all() or (G.size and np.abs(G).max() > 1e300):
+        raise InputError("photometric calibration: values must be finite numbers", path=path, line=1)
     if G.size < 256:
         raise InputError(f"photometric calibration needs at least 256 values on line 1, found {G.size}",
                          path=path, line=1)
@@ -137,8 +148,13 @@ def read_pcalib(path: Path) -> np.ndarray:
 
 def read_vignette(path: Path, width: int, height: int) -> np.ndarray:
     """Vignette image (16- or 8-bit) divided by its maximum, float32 (H, W)."""
-    data = np.fromfile(path, dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    check_file(path, "vignette image")
+    try:
+        with open(path, "rb") as f:
+            data = np.frombuffer(f.read(), dtype=np.uint8)
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except (OSError, cv2.error) as e:
+        raise InputError(f"cannot read the vignette image ({getattr(e, 'strerror', None) or e})", path=path) from None
     if img is None:
         raise InputError("cannot decode the vignette image", path=path)
     if img.ndim == 3:
@@ -164,12 +180,15 @@ class _ImageSource:
             self.folder: Path | None = root / "images"
         else:
             self.folder = None
+            check_file(self.zip_path, "image archive")
             try:
                 with zipfile.ZipFile(self.zip_path) as z:
                     members = [m for m in z.namelist()
                                if not m.endswith("/") and Path(m).suffix.lower() in _IMAGE_EXT]
             except zipfile.BadZipFile as e:
                 raise InputError(f"not a readable zip file ({e})", path=self.zip_path) from None
+            except OSError as e:
+                raise InputError(f"cannot read the image archive ({e.strerror or e})", path=self.zip_path) from None
             self.names = sorted(members, key=lambda m: _natural_key(Path(m).name))
         if not self.names:
             raise DatasetError("no images", path=self.folder or self.zip_path)
@@ -180,10 +199,19 @@ class _ImageSource:
     def read(self, i: int) -> np.ndarray:
         if self.folder is not None:
             return read_image(self.folder / self.names[i], grey=True)
-        if self._zip is None:
-            self._zip = zipfile.ZipFile(self.zip_path)
-        data = np.frombuffer(self._zip.read(self.names[i]), dtype=np.uint8)
-        img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
+        try:
+            if self._zip is None:
+                self._zip = zipfile.ZipFile(self.zip_path)
+            data = np.frombuffer(self._zip.read(self.names[i]), dtype=np.uint8)
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError, NotImplementedError, RuntimeError) as e:
+            # a damaged or truncated archive, a member that vanished, an unsupported compression or encryption
+            self._zip = None
+            raise InputError(f"cannot read zip member {self.names[i]!r} ({getattr(e, 'strerror', None) or e})",
+                             path=self.zip_path) from None
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
+        except cv2.error:
+            img = None
         if img is None:
             raise InputError(f"cannot decode zip member {self.names[i]!r}", path=self.zip_path)
         return img
@@ -211,6 +239,11 @@ def open_tum_monovo(
     """
     root = Path(path)
     if not detect(root):
+        if root.is_dir():  # name the file that is missing (or is a folder)
+            check_file(root / "camera.txt", "calibration file")
+            check_file(root / "times.txt", "timestamps file")
+            if not (root / "images").is_dir():
+                check_file(root / "images.zip", "image archive (or an images/ folder)")
         raise DatasetError("not a TUM monoVO sequence (needs camera.txt, times.txt and images.zip or images/)",
                            path=root)
     source = _ImageSource(root)
@@ -220,6 +253,10 @@ def open_tum_monovo(
                          path=root / "times.txt")
     calib = read_calibration_file(root / "camera.txt", flavour="dso")
     model = calib.model
+    first = source.read(0)  # before building the undistortion maps for the size camera.txt claims
+    if first.shape != (model.height, model.width):
+        raise InputError(f"the calibration is for {model.width}x{model.height} images, {Path(source.names[0]).name} "
+                         f"is {first.shape[1]}x{first.shape[0]}", path=calib.path)
     und = calib.undistorter(multiple) if undistort else Undistorter.create(model, "none", multiple=1)
     details: dict = {
         "images": "images.zip" if source.folder is None else "images/",
@@ -234,8 +271,9 @@ def open_tum_monovo(
     if photometric:
         pc, vg = root / "pcalib.txt", root / "vignette.png"
         for p in (pc, vg):
-            if not p.is_file():
+            if not p.exists():
                 raise InputError("photometric calibration requested but the file is missing", path=p)
+            check_file(p, "photometric calibration file")
         G = read_pcalib(pc)
         V = read_vignette(vg, model.width, model.height)
         details["photometric"] = "G(I)/V (pcalib.txt, vignette.png)"
@@ -254,7 +292,7 @@ def open_tum_monovo(
 
     poses = None
     gt_path = root / "groundtruthSync.txt"
-    if gt_path.is_file():
+    if gt_path.exists():
         gt_t, gt_T = read_groundtruth_sync(gt_path)
         poses = np.full((ids.size, 4, 4), np.nan)
         if gt_t.size:

@@ -17,6 +17,7 @@ are distorted; the distortion is recorded in ``details`` and not applied by this
 
 from __future__ import annotations
 
+import math
 import re
 import warnings
 from pathlib import Path
@@ -28,7 +29,7 @@ from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_fi
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.association import associate
-from dmtrack.io.trajectory import read_tum
+from dmtrack.io.trajectory import read_text_file, read_tum
 
 FORMAT = "tum-rgbd"
 WIDTH, HEIGHT = 640, 480
@@ -49,11 +50,9 @@ def detect(path: Path) -> bool:
 
 def read_file_list(path: Path) -> tuple[np.ndarray, list[str]]:
     """``timestamp filename`` lines of ``rgb.txt`` / ``depth.txt`` (comments skipped)."""
-    if not path.is_file():
-        raise InputError("file list not found", path=path)
     stamps: list[float] = []
     names: list[str] = []
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in enumerate(read_text_file(path, "file list").splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -63,7 +62,9 @@ def read_file_list(path: Path) -> tuple[np.ndarray, list[str]]:
         try:
             stamps.append(float(fields[0]))
         except ValueError:
-            raise InputError(f"cannot read timestamp {fields[0]!r}", path=path, line=lineno) from None
+            raise InputError(f"cannot read timestamp {fields[0][:40]!r}", path=path, line=lineno) from None
+        if not math.isfinite(stamps[-1]):
+            raise InputError(f"timestamp {fields[0][:40]!r} is not a finite number", path=path, line=lineno)
         names.append(fields[1])
     if not names:
         raise InputError("no entries", path=path)
@@ -99,12 +100,12 @@ def open_tum_rgbd(path: str | Path, max_gt_gap: float = 0.1, max_depth_diff: flo
     images = [root / n for n in names]
     for p in (images[0], images[-1]):
         if not p.is_file():
-            raise DatasetError("image listed in rgb.txt not found", path=p)
+            raise DatasetError("image listed in rgb.txt " + ("is a folder" if p.is_dir() else "not found"), path=p)
     camera, details = _camera_for(root)
 
     poses = None
     gt_path = root / "groundtruth.txt"
-    if gt_path.is_file():
+    if gt_path.exists():
         gt = read_tum(gt_path)
         poses = gt.interpolate(stamps, max_gap=max_gt_gap)
         if not np.isfinite(poses[:, 0, 0]).any():
@@ -112,7 +113,7 @@ def open_tum_rgbd(path: str | Path, max_gt_gap: float = 0.1, max_depth_diff: flo
             poses = None
 
     depth_paths = None
-    if (root / "depth.txt").is_file():
+    if (root / "depth.txt").exists():
         d_stamps, d_names = read_file_list(root / "depth.txt")
         ia, ib = associate(stamps, d_stamps, max_depth_diff)
         depth_paths = [None] * len(images)

@@ -49,6 +49,7 @@ import cv2
 import numpy as np
 
 from dmtrack.datasets.base import Frame
+from dmtrack.datasets.intrinsics import check_range
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.geometry.distortion import (
@@ -58,7 +59,7 @@ from dmtrack.geometry.distortion import (
     PinholeModel,
     RadTanModel,
 )
-from dmtrack.io.trajectory import Trajectory
+from dmtrack.io.trajectory import Trajectory, read_text_file
 
 __all__ = [
     "CalibrationFile",
@@ -70,6 +71,8 @@ __all__ = [
 
 OutputMode = Literal["crop", "full", "none"]
 MULTIPLE = 16
+#: Largest image side accepted from a calibration file (OpenCV's ``remap`` handles sides below 2¹⁵).
+MAX_SIDE = 32767
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -120,8 +123,11 @@ def _numbers(text: str, path: Path, lineno: int, what: str) -> list[float]:
 
 def _size(text: str, path: Path, lineno: int, what: str) -> tuple[int, int]:
     fields = text.split()
-    if len(fields) != 2 or not all(re.fullmatch(r"\d+", f) for f in fields):
-        raise InputError(f"{what}: expected 'width height' (two positive integers), found {text.strip()!r}",
+    if len(fields) != 2 or not all(re.fullmatch(r"[0-9]+", f) for f in fields):
+        raise InputError(f"{what}: expected 'width height' (two positive integers), found {text.strip()[:60]!r}",
+                         path=path, line=lineno)
+    if any(len(f.lstrip("0")) > 6 for f in fields) or max(int(f) for f in fields) > MAX_SIDE:
+        raise InputError(f"{what}: {fields[0][:12]}x{fields[1][:12]} is too large (at most {MAX_SIDE} pixels a side)",
                          path=path, line=lineno)
     w, h = int(fields[0]), int(fields[1])
     if w <= 0 or h <= 0:
@@ -143,9 +149,7 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
         Naming the file and line, for a missing line, a wrong number of parameters or an unknown model.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("calibration file not found", path=path)
-    lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
+    lines = [ln.strip() for ln in read_text_file(path, "calibration file").splitlines()]
     while lines and not lines[-1]:
         lines.pop()
     if len(lines) < 4:
@@ -160,6 +164,8 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
     # line 1 ------------------------------------------------------------------------------------------
     first = lines[0]
     m = re.match(r"^([A-Za-z]+)\s+(.*)$", first)
+    if m and m.group(1).lower() in ("nan", "inf", "infinity"):  # a number, not a model name
+        m = None
     if m:
         prefix = m.group(1).lower()
         if prefix not in _PREFIXES or flavour == "lsdslam":
@@ -185,6 +191,7 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
                 f"found {len(pars)}",
                 path=path, line=1,
             )
+    check_range(pars, "camera parameters", path, 1)
     fx, fy, cx, cy = pars[:4]
     relative = False
     if flavour == "dso":
@@ -223,6 +230,7 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
                 f"{lines[2]!r}",
                 path=path, line=3,
             )
+        check_range(vals, "output calibration", path, 3)
         ofx, ofy, ocx, ocy = vals[:4]
         if ocx > 1 or ocy > 1:
             raise InputError("output calibration must be relative to the output size (cx, cy < 1)",
@@ -254,7 +262,7 @@ def _to_input_pixels(model: CameraModel, xy: np.ndarray) -> tuple[np.ndarray, np
     return np.stack([u, v], axis=-1), ok
 
 
-def _centre_interval(model: CameraModel, axis: int) -> tuple[float, float]:
+def _centre_interval(model: CameraModel, axis: int, source: Path | None = None) -> tuple[float, float]:
     """Extent of the valid part of a centre line (x axis or y axis) in normalised undistorted coordinates."""
     t = (np.arange(100000) - 50000.0) / 10000.0  # [-5, 5) as DSO
     xy = np.zeros((t.size, 2))
@@ -262,7 +270,7 @@ def _centre_interval(model: CameraModel, axis: int) -> tuple[float, float]:
     _, ok = _to_input_pixels(model, xy)
     i0 = 50000
     if not ok[i0]:
-        raise DatasetError("the principal ray does not hit the input image: cannot undistort")
+        raise DatasetError("the principal ray does not hit the input image: cannot undistort", path=source)
     lo = i0
     while lo > 0 and ok[lo - 1]:
         lo -= 1
@@ -290,10 +298,10 @@ def _camera_from_box(box: list[float], w: int, h: int) -> PinholeCamera:
     return PinholeCamera(fx, fy, -min_x * fx, -min_y * fy, w, h)
 
 
-def _optimal_crop(model: CameraModel, w: int, h: int) -> PinholeCamera:
+def _optimal_crop(model: CameraModel, w: int, h: int, source: Path | None = None) -> PinholeCamera:
     """DSO's ``makeOptimalK_crop``, plus a final check of every output pixel."""
-    min_x, max_x = _centre_interval(model, 0)
-    min_y, max_y = _centre_interval(model, 1)
+    min_x, max_x = _centre_interval(model, 0, source)
+    min_y, max_y = _centre_interval(model, 1, source)
     box = [min_x * 1.01, max_x * 1.01, min_y * 1.01, max_y * 1.01]
     for _ in range(2000):
         left, right, top, bottom = _border_ok(model, box, w, h)
@@ -317,10 +325,11 @@ def _optimal_crop(model: CameraModel, w: int, h: int) -> PinholeCamera:
             box[2] *= 0.995
         if oob_b:
             box[3] *= 0.995
-    raise DatasetError("failed to find a valid crop for the undistorted image (is the calibration sensible?)")
+    raise DatasetError("failed to find a valid crop for the undistorted image (is the calibration sensible?)",
+                       path=source)
 
 
-def _optimal_full(model: CameraModel, w: int, h: int) -> PinholeCamera:
+def _optimal_full(model: CameraModel, w: int, h: int, source: Path | None = None) -> PinholeCamera:
     """The smallest rectangle (in normalised undistorted coordinates) containing every input pixel."""
     W, H = model.width, model.height
     us = np.arange(W, dtype=np.float64)
@@ -334,10 +343,22 @@ def _optimal_full(model: CameraModel, w: int, h: int) -> PinholeCamera:
     if not np.isfinite(xy).all():
         raise DatasetError(
             "'full' undistortion: some input border pixels have no undistorted ray (field of view of 180° or "
-            "more, or a distortion polynomial past its turning point); use 'crop'"
+            "more, or a distortion polynomial past its turning point); use 'crop'",
+            path=source,
         )
     box = [float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()), float(xy[:, 1].max())]
     return _camera_from_box(box, w, h)
+
+
+def _distortion_free(model: CameraModel) -> bool:
+    """Whether ``model`` is a plain pinhole (``ω = 0`` FOV, all-zero radial-tangential coefficients, …)."""
+    if isinstance(model, PinholeModel):
+        return True
+    if isinstance(model, FOVModel):
+        return model.omega == 0.0
+    if isinstance(model, RadTanModel):
+        return model.k1 == model.k2 == model.p1 == model.p2 == model.k3 == 0.0
+    return False
 
 
 def _output_rays(cam: PinholeCamera) -> np.ndarray:
@@ -403,25 +424,48 @@ class Undistorter:
             given camera's size).
         multiple : the output width and height are reduced to multiples of this (16 for LSD-SLAM).
         """
-        if isinstance(output, PinholeCamera):
-            cam, _ = output.crop_to_multiple(multiple)
-            mode = "given"
-        elif output == "none":
-            pin = model.pinhole()
-            cam, box = pin.crop_to_multiple(multiple)
-            return cls(model, cam, "none", None, None, box, source)
-        elif output in ("crop", "full"):
-            w, h = size if size is not None else (model.width, model.height)
-            w, h = w - w % multiple, h - h % multiple
-            if w <= 1 or h <= 1:
-                raise InputError(f"output size {size} has no multiple of {multiple}", path=source)
-            cam = _optimal_crop(model, w, h) if output == "crop" else _optimal_full(model, w, h)
-            mode = output
-        else:
-            raise InputError(f"unknown undistortion output {output!r} (use crop, full, none or a camera)", path=source)
+        try:
+            if isinstance(output, PinholeCamera):
+                cam, _ = output.crop_to_multiple(multiple)
+                mode = "given"
+            elif output == "none" or (output in ("crop", "full") and _distortion_free(model)
+                                       and (size is None or tuple(size) == (model.width, model.height))):
+                # "none", or a camera without distortion: nothing to undistort, the images pass through as they
+                # are (only cropped at the centre where a side is not a multiple of ``multiple``)
+                pin = model.pinhole()
+                cam, box = pin.crop_to_multiple(multiple)
+                return cls(model, cam, "none", None, None, box, source)
+            elif output in ("crop", "full"):
+                w, h = size if size is not None else (model.width, model.height)
+                w, h = w - w % multiple, h - h % multiple
+                if w <= 1 or h <= 1:
+                    raise InputError(f"output size {size} has no multiple of {multiple}", path=source)
+                if _distortion_free(model):
+                    return cls._resize(model, w, h, output, source)
+                cam = _optimal_crop(model, w, h, source) if output == "crop" else _optimal_full(model, w, h, source)
+                mode = output
+            else:
+                raise InputError(f"unknown undistortion output {output!r} (use crop, full, none or a camera)",
+                                 path=source)
+        except ValueError as e:  # a degenerate camera (e.g. an image smaller than ``multiple``)
+            raise DatasetError(f"cannot undistort: {e}", path=source) from None
         uv, ok = _to_input_pixels(model, _output_rays(cam))
         map_x = np.where(ok, uv[..., 0], -1.0).astype(np.float32)
         map_y = np.where(ok, uv[..., 1], -1.0).astype(np.float32)
+        return cls(model, cam, mode, map_x, map_y, None, source)
+
+    @classmethod
+    def _resize(cls, model: CameraModel, w: int, h: int, mode: str, source: Path | None) -> Undistorter:
+        """A camera without distortion to another size: input pixel centres 0 and W − 1 land on output pixels 0
+        and w − 1 (``crop`` and ``full`` agree: the whole image is valid)."""
+        W, H = model.width, model.height
+        if W < 2 or H < 2:
+            raise InputError(f"cannot resize a {W}x{H} image", path=source)
+        box = [-model.cx / model.fx, (W - 1 - model.cx) / model.fx, -model.cy / model.fy, (H - 1 - model.cy) / model.fy]
+        cam = _camera_from_box(box, w, h)
+        uv = model.normalised_to_pixel(model.distort(_output_rays(cam)))  # type: ignore[attr-defined]
+        map_x = np.clip(uv[..., 0], 0.0, W - 1.0).astype(np.float32)
+        map_y = np.clip(uv[..., 1], 0.0, H - 1.0).astype(np.float32)
         return cls(model, cam, mode, map_x, map_y, None, source)
 
     @property
@@ -535,6 +579,12 @@ def undistort_sequence(seq: Any, calibration: CalibrationFile, multiple: int = M
     """``seq`` wrapped in an :class:`UndistortedSequence`, or ``seq`` itself when nothing changes."""
     und = calibration.undistorter(multiple)
     if und.is_identity:
+        if (seq.width, seq.height) != und.input_size:
+            raise InputError(
+                f"the calibration is for {und.input_size[0]}x{und.input_size[1]} images, the sequence has "
+                f"{seq.width}x{seq.height}",
+                path=calibration.path,
+            )
         seq.camera = und.camera
         return seq
     return UndistortedSequence(seq, und)

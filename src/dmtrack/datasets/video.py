@@ -24,6 +24,7 @@ from dmtrack.datasets.base import LoaderSequence
 from dmtrack.datasets.intrinsics import read_intrinsics_file
 from dmtrack.datasets.undistort import UndistortedSequence, read_calibration_file, undistort_sequence
 from dmtrack.errors import DatasetError, InputError
+from dmtrack.io.trajectory import read_text_file
 
 FORMAT = "video"
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".flv", ".ts")
@@ -37,7 +38,7 @@ def sidecar_calibration(video: Path) -> Path | None:
     """The intrinsics file belonging to ``video``, if any."""
     for p in (video.with_name(video.name + ".camera.txt"), video.with_suffix(".camera.txt"),
               video.parent / "camera.txt"):
-        if p.is_file():
+        if p.exists():  # a folder of that name is reported when it is read
             return p
     return None
 
@@ -116,6 +117,8 @@ def open_video(
     undistort : apply a 4-line calibration sidecar (default).
     """
     p = Path(path)
+    if p.is_dir():
+        raise DatasetError("video file expected, but this is a folder", path=p)
     if not p.is_file():
         raise DatasetError("no such video file", path=p)
     if scan:
@@ -152,7 +155,7 @@ def open_video(
     calib = None
     side = sidecar_calibration(p)
     if side is not None:
-        lines = [ln for ln in side.read_text(encoding="utf-8").splitlines() if ln.strip()]
+        lines = [ln for ln in read_text_file(side, "intrinsics file").splitlines() if ln.strip()]
         if len(lines) >= 4:
             calib = read_calibration_file(side, flavour="dso")
             camera = calib.model.pinhole()

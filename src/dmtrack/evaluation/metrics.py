@@ -25,13 +25,15 @@ no alignment is needed.  Angles are computed with ``atan2`` (accurate near 0 and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
 from dmtrack.errors import InputError
-from dmtrack.evaluation.alignment import AlignMode, align_trajectory
+from dmtrack.evaluation.alignment import ALIGN_MODES, AlignMode, align_trajectory
 from dmtrack.io.association import associate_trajectories
 from dmtrack.io.trajectory import Trajectory
 
@@ -44,6 +46,11 @@ repeats its last pose), and 0° or 180° would claim information that is not the
 
 
 # -- helpers -------------------------------------------------------------------------------------
+def _num(value: Any) -> str:
+    """A number for a message: ``0.5``, not ``np.float64(0.5)``."""
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
 def _check_pair(gt: Trajectory, est: Trajectory, what: str) -> None:
     if len(gt) != len(est):
         raise ValueError(
@@ -185,9 +192,9 @@ def rpe_pairs(
     starts ``i`` without such a frame are dropped.
     """
     if not 0.0 < r_l <= 1.0:
-        raise ValueError(f"r_l must be in (0, 1], got {r_l!r}")
+        raise ValueError(f"r_l must be in (0, 1], got {_num(r_l)}")
     if n_lengths < 1:
-        raise ValueError(f"n_lengths must be >= 1, got {n_lengths!r}")
+        raise ValueError(f"n_lengths must be >= 1, got {_num(n_lengths)}")
     dist = gt.distances()
     total = float(dist[-1]) if dist.size else 0.0
     if not total > 0.0:
@@ -306,11 +313,11 @@ def rpe(
     """
     _check_pair(gt, est, "rpe")
     if delta <= 0:
-        raise ValueError(f"rpe: delta must be > 0, got {delta!r}")
+        raise ValueError(f"rpe: delta must be > 0, got {_num(delta)}")
     n = len(gt)
     if delta_unit == "frames":
         if int(delta) != delta:
-            raise ValueError(f"rpe: delta in frames must be an integer, got {delta!r}")
+            raise ValueError(f"rpe: delta in frames must be an integer, got {_num(delta)}")
         d = int(delta)
         i = np.arange(n - d) if all_pairs else np.arange(0, n, d)[:-1]
         i = i[i + d < n]
@@ -336,12 +343,44 @@ def rpe(
 
 
 # -- all together ----------------------------------------------------------------------------------
+#: Largest coordinate :func:`evaluate` computes with (squares of larger ones overflow on the way).
+MAX_COORDINATE = 1e100
+
+
+def _who(role: str, name: str | Path | None) -> str:
+    return f"the {role}" if name is None else f"the {role} {name}"
+
+
+def _check_evaluate_inputs(
+    gt: Trajectory, est: Trajectory, max_diff: Any, r_l: Any, align: Any,
+    gt_name: str | Path | None, est_name: str | Path | None,
+) -> None:
+    try:
+        md, rl = float(max_diff), float(r_l)
+    except (TypeError, ValueError):
+        raise InputError(f"max_diff and r_l must be numbers, got {_num(max_diff)} and {_num(r_l)}") from None
+    if not (math.isfinite(md) and md >= 0.0):
+        raise InputError(f"the largest timestamp difference (max_diff) must be a finite number ≥ 0, got {_num(md)}")
+    if not 0.0 < rl <= 1.0:
+        raise InputError(f"the RPE length ratio r_l must be in (0, 1], got {_num(rl)}")
+    if align not in ALIGN_MODES:
+        raise InputError(f"unknown alignment {align!r} (use one of {', '.join(ALIGN_MODES)})")
+    for traj, role, name in ((gt, "ground truth", gt_name), (est, "estimate", est_name)):
+        if not (np.isfinite(traj.timestamps).all() and np.isfinite(traj.poses).all()):
+            raise InputError(f"the {role} has timestamps or poses that are not finite numbers", path=name)
+        if len(traj) and np.abs(traj.positions).max() > MAX_COORDINATE:
+            raise InputError(f"the {role} has coordinates beyond {MAX_COORDINATE:g}: too large to evaluate", path=name)
+
+
 def evaluate(
     gt: Trajectory,
     est: Trajectory,
     max_diff: float = 0.01,
     r_l: float = 1.0 / 3.0,
     align: AlignMode = "sim3",
+    *,
+    gt_name: str | Path | None = None,
+    est_name: str | Path | None = None,
 ) -> dict[str, Any]:
     """Associate by timestamp, then ATE (after ``align``) and the paper's RPE on the matched poses.
 
@@ -358,6 +397,7 @@ def evaluate(
     max_diff : association tolerance (same unit as the timestamps).
     r_l : longest RPE length as a fraction of the matched ground-truth path.
     align : ATE alignment mode.
+    gt_name, est_name : the files the trajectories came from, named in the errors (``dmtrack eval``).
 
     Returns
     -------
@@ -371,8 +411,10 @@ def evaluate(
     Raises
     ------
     InputError
-        Fewer than 3 poses match.
+        Fewer than 3 poses match; a trajectory that does not move (nothing to align, no RPE lengths); poses that
+        are not finite or too large to compute with; a bad ``max_diff``, ``r_l`` or ``align``.
     """
+    _check_evaluate_inputs(gt, est, max_diff, r_l, align, gt_name, est_name)
     gt_m, est_m = associate_trajectories(gt, est, max_diff=max_diff)
     n = len(gt_m)
     if n < 3:
@@ -381,12 +423,24 @@ def evaluate(
             return f"{t.timestamps.min():.6f}..{t.timestamps.max():.6f}" if len(t) else "empty"
 
         raise InputError(
-            f"only {n} pose(s) of the estimate ({len(est)} poses, t={span(est)}) match the ground truth "
-            f"({len(gt)} poses, t={span(gt)}) within {max_diff} — need at least 3; check that both use "
-            "the same time base (seconds vs frame indices)"
+            f"only {n} pose(s) of {_who('estimate', est_name)} ({len(est)} poses, t={span(est)}) match "
+            f"{_who('ground truth', gt_name)} ({len(gt)} poses, t={span(gt)}) within {_num(max_diff)} — need at "
+            "least 3; check that both use the same time base (seconds vs frame indices)"
         )
-    a = ate(gt_m, est_m, align)
-    r = rpe_paper(gt_m, est_m, r_l)
+    if not gt_m.path_length() > 0.0:
+        raise InputError(f"the ground truth does not move over the {n} matched poses (zero path length): the RPE "
+                         "lengths are undefined", path=gt_name)
+    for traj, role, name in ((est_m, "estimate", est_name), (gt_m, "ground truth", gt_name)):
+        spread = np.ptp(traj.positions, axis=0).max()
+        if align != "none" and not spread > 1e-12 * max(1.0, float(np.abs(traj.positions).max())):
+            raise InputError(f"the {role}'s {n} matched positions are all the same, so the {align} alignment is "
+                             "undetermined", path=name)
+    try:
+        a = ate(gt_m, est_m, align)
+        r = rpe_paper(gt_m, est_m, r_l)
+    except (ValueError, np.linalg.LinAlgError) as e:  # degenerate input the checks above did not foresee
+        raise InputError(f"cannot evaluate {_who('estimate', est_name)} against "
+                         f"{_who('ground truth', gt_name)}: {e}") from None
     gaps = np.diff(gt_m.timestamps)
     return {
         "ate_rmse": a.rmse,

@@ -20,11 +20,20 @@ FloatArray = NDArray[np.float64]
 Box = tuple[int, int, int, int]
 
 
+def plain(value: Any) -> str:
+    """``repr`` of a value for a message, with NumPy scalars as plain numbers (``1.5``, not ``np.float64(1.5)``)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    elif isinstance(value, tuple | list):
+        return repr(type(value)(v.item() if isinstance(v, np.generic) else v for v in value))
+    return repr(value)
+
+
 def _as_int(value: Any, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         if isinstance(value, float | np.floating) and float(value).is_integer():
             return int(value)
-        raise ValueError(f"{name} must be an integer, got {value!r}")
+        raise ValueError(f"{name} must be an integer, got {plain(value)}")
     return int(value)
 
 
@@ -60,9 +69,9 @@ class PinholeCamera:
             try:
                 f = float(v)
             except (TypeError, ValueError):
-                raise ValueError(f"{name} must be a number, got {v!r}") from None
+                raise ValueError(f"{name} must be a number, got {plain(v)}") from None
             if not math.isfinite(f):
-                raise ValueError(f"{name} must be finite, got {v!r}")
+                raise ValueError(f"{name} must be finite, got {plain(v)}")
             object.__setattr__(self, name, f)
         if self.fx <= 0.0 or self.fy <= 0.0:
             raise ValueError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
@@ -187,7 +196,7 @@ class PinholeCamera:
         """
         fac = float(factor)
         if not (math.isfinite(fac) and fac > 0.0):
-            raise ValueError(f"scale factor must be finite and > 0, got {factor!r}")
+            raise ValueError(f"scale factor must be finite and > 0, got {plain(factor)}")
         return self.resized(round(self.width * fac), round(self.height * fac))
 
     # crops -------------------------------------------------------------------------------------------
@@ -315,7 +324,7 @@ class PinholeCamera:
 
 def _check_box(box: tuple[Any, Any, Any, Any], width: int, height: int) -> Box:
     if len(box) != 4:
-        raise ValueError(f"crop box must be (left, top, width, height), got {box!r}")
+        raise ValueError(f"crop box must be (left, top, width, height), got {plain(box)}")
     left, top, w, h = (_as_int(b, n) for b, n in zip(box, ("left", "top", "width", "height"), strict=True))
     if w <= 0 or h <= 0:
         raise ValueError(f"crop box must be non-empty, got {w}x{h}")

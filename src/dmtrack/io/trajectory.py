@@ -57,21 +57,21 @@ def read_text_file(path: str | Path, what: str) -> str:
             data = f.read()
     except OSError as e:
         raise InputError(f"cannot read the {what} ({e.strerror or e})", path=path) from None
-    nul = data.find(b"\x00")
-    if nul >= 0:
-        raise InputError(f"not a text {what} (NUL byte at byte {nul}: not a text file)", path=path)
     try:
-        return data.decode("utf-8-sig")
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise InputError(
             f"not a text {what} ({e.reason} at byte {e.start}: not a text file, or not UTF-8)", path=path
         ) from None
+    nul = text.find("\x00")
+    if nul >= 0:
+        raise InputError(f"not a text {what} (NUL character at position {nul}: not a text file)", path=path)
+    return text
 
 
 def _number(value: Any) -> str:
     """A number as plain text (``1.5``, not ``np.float64(1.5)``)."""
-    v = float(value)
-    return str(int(v)) if v.is_integer() and abs(v) < 1e16 else repr(v)
+    return repr(float(value))
 
 
 class Trajectory:
@@ -208,8 +208,11 @@ def _nearest_rotations(R: np.ndarray) -> np.ndarray:
 
 
 # -- parsing -------------------------------------------------------------------------------------
-def _parse_rows(path: Path, ncols: tuple[int, ...], what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Numbers of every data line without NaN.
+def _parse_rows(
+    path: Path, ncols: tuple[int, ...], what: str, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Numbers of every data line without NaN; what is worth a warning is appended to ``notes`` (the readers warn
+    only once the whole file is accepted, so that a refused file gets one line: its error).
 
     Returns (rows (M, ncols), 1-based line numbers (M,), index of each row among all data lines (M,),
     number of data lines including the NaN ones).
@@ -251,14 +254,11 @@ def _parse_rows(path: Path, ncols: tuple[int, ...], what: str) -> tuple[np.ndarr
     n_total = data.shape[0]
     nan_rows = np.isnan(data).any(axis=1)
     if nan_rows.any():
-        warnings.warn(
-            f"{path}: skipped {int(nan_rows.sum())} line(s) with NaN values (first at line "
-            f"{int(linenos[nan_rows][0])})",
-            stacklevel=3,
-        )
-        data, linenos, rowidx = data[~nan_rows], linenos[~nan_rows], rowidx[~nan_rows]
-        if data.shape[0] == 0:
+        if nan_rows.all():
             raise InputError(f"{what}: every pose in the file is NaN", path=path)
+        notes.append(f"{path}: skipped {int(nan_rows.sum())} line(s) with NaN values (first at line "
+                     f"{int(linenos[nan_rows][0])})")
+        data, linenos, rowidx = data[~nan_rows], linenos[~nan_rows], rowidx[~nan_rows]
     return data, linenos, rowidx, n_total
 
 
@@ -285,6 +285,12 @@ def _check_rotations(R: np.ndarray, path: Path, linenos: np.ndarray) -> None:
         )
 
 
+def _warn(notes: list[str]) -> None:
+    """The warnings of a file that was accepted (stack level: the caller of the reader)."""
+    for note in notes:
+        warnings.warn(note, stacklevel=3)
+
+
 def read_tum(path: str | Path) -> Trajectory:
     """Read a TUM trajectory file (``timestamp tx ty tz qx qy qz qw``).
 
@@ -292,7 +298,8 @@ def read_tum(path: str | Path) -> Trajectory:
     (with a warning); duplicate timestamps are an error.
     """
     path = Path(path)
-    data, linenos, _, _ = _parse_rows(path, (8,), "TUM trajectory")
+    notes: list[str] = []
+    data, linenos, _, _ = _parse_rows(path, (8,), "TUM trajectory", notes)
     size = np.abs(data[:, 4:8]).max(axis=1)  # not the norm: that overflows for entries near 1e308
     if (size < 1e-8).any():
         i = int(np.argmax(size < 1e-8))
@@ -300,7 +307,7 @@ def read_tum(path: str | Path) -> Trajectory:
     data[:, 4:8] /= size[:, None]
     order = np.argsort(data[:, 0], kind="stable")
     if (np.diff(order) != 1).any():
-        warnings.warn(f"{path}: timestamps are not in increasing order; sorted them", stacklevel=2)
+        notes.append(f"{path}: timestamps are not in increasing order; sorted them")
         data, linenos = data[order], linenos[order]
     dup = np.flatnonzero(np.diff(data[:, 0]) == 0)
     if dup.size:
@@ -308,7 +315,9 @@ def read_tum(path: str | Path) -> Trajectory:
             f"TUM trajectory: duplicate timestamp {_number(data[dup[0], 0])}", path=path,
             line=int(linenos[dup[0] + 1]),
         )
-    return Trajectory.from_tum_array(data)
+    traj = Trajectory.from_tum_array(data)
+    _warn(notes)
+    return traj
 
 
 def read_kitti(path: str | Path, timestamps: np.ndarray | str | Path | None = None) -> Trajectory:
@@ -320,17 +329,23 @@ def read_kitti(path: str | Path, timestamps: np.ndarray | str | Path | None = No
         NaN rows are skipped, so with NaN rows the timestamps of the remaining rows are used.
     """
     path = Path(path)
-    data, linenos, rowidx, n_total = _parse_rows(path, (12,), "KITTI trajectory")
+    notes: list[str] = []
+    data, linenos, rowidx, n_total = _parse_rows(path, (12,), "KITTI trajectory", notes)
     poses = np.tile(np.eye(4), (data.shape[0], 1, 1))
     poses[:, :3, :4] = data.reshape(-1, 3, 4)
     _check_rotations(poses[:, :3, :3], path, linenos)
     if timestamps is None:
+        _warn(notes)
         return Trajectory(rowidx.astype(np.float64), poses)
+    source = ""
     if isinstance(timestamps, (str, Path)):
+        source = f" in {timestamps}"
         timestamps = read_times(timestamps)
     timestamps = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     if timestamps.shape[0] != n_total:
-        raise InputError(f"KITTI trajectory has {n_total} poses but {timestamps.shape[0]} timestamps", path=path)
+        raise InputError(f"KITTI trajectory has {n_total} poses but {timestamps.shape[0]} timestamps{source}",
+                         path=path)
+    _warn(notes)
     return Trajectory(timestamps[rowidx], poses)
 
 
@@ -351,7 +366,10 @@ def read_times(path: str | Path) -> np.ndarray:
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
-        first = line.replace(",", " ").split()[0]
+        fields = line.replace(",", " ").split()
+        if not fields:
+            raise InputError("no timestamp on this line", path=path, line=lineno)
+        first = fields[0]
         try:
             t = float(first)
         except ValueError:

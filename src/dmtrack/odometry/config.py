@@ -12,6 +12,7 @@ non-default configurations, e.g.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -70,9 +71,14 @@ class TrackerConfig:
             raise InputError(f"tracker.levels {self.levels} must be strictly decreasing (coarse to fine)")
         if any(lv < 0 or lv >= len(self.max_its) for lv in self.levels):
             raise InputError(f"tracker.levels {self.levels} outside 0..{len(self.max_its) - 1}")
+        if any(n < 0 for n in self.max_its):
+            raise InputError(f"tracker.max_its {self.max_its} must not be negative")
         if self.huber_d <= 0 or self.camera_pixel_noise2 <= 0:
             raise InputError("tracker.huber_d and tracker.camera_pixel_noise2 must be positive")
 
+
+#: Most pyramid levels: level 16 of any image that fits in memory is a single pixel.
+MAX_PYRAMID_LEVELS = 16
 
 #: Values of ``VOConfig.channel_cost``.
 CHANNEL_COSTS = ("balanced", "sum", "mean")
@@ -113,7 +119,7 @@ class ChannelRule:
         energy_channels: float | None = None,
     ) -> ChannelRule:
         if channel_cost not in CHANNEL_COSTS:
-            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {channel_cost!r}")
+            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {_short(channel_cost)}")
         n = int(n_channels)
         if n <= 1:
             return cls(1.0, 1.0, 1.0)
@@ -210,7 +216,7 @@ class DepthConfig:
     def __post_init__(self) -> None:
         if self.update_variance not in UPDATE_VARIANCE_MODES:
             raise InputError(
-                f"depth.update_variance must be 'smoothed', 'raw-search' or 'raw', not {self.update_variance!r}"
+                f"depth.update_variance must be 'smoothed', 'raw-search' or 'raw', not {_short(self.update_variance)}"
             )
 
 
@@ -277,17 +283,19 @@ class VOConfig:
 
     def __post_init__(self) -> None:
         if self.channel_cost not in CHANNEL_COSTS:
-            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {self.channel_cost!r}")
+            raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {_short(self.channel_cost)}")
         for key in ("info_channels", "energy_channels"):
             v = getattr(self, key)
             if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf")):
-                raise InputError(f"{key} must be a positive number, not {v!r}")
+                raise InputError(f"{key} must be a positive number, not {_short(v)}")
         if self.init not in ("random", "groundtruth"):
-            raise InputError(f"init must be 'random' or 'groundtruth', not {self.init!r}")
+            raise InputError(f"init must be 'random' or 'groundtruth', not {_short(self.init)}")
         if self.map_lag < 0:
             raise InputError(f"map_lag must be ≥ 0, got {self.map_lag}")
-        if self.pyramid_levels < 1:
-            raise InputError("pyramid_levels must be ≥ 1")
+        if not 1 <= self.pyramid_levels <= MAX_PYRAMID_LEVELS:
+            raise InputError(f"pyramid_levels must be 1..{MAX_PYRAMID_LEVELS}, got {self.pyramid_levels}")
+        if self.seed < 0:
+            raise InputError(f"seed must be ≥ 0, got {self.seed}")
         if max(self.tracker.levels) >= self.pyramid_levels:
             raise InputError(f"tracker.levels {self.tracker.levels} need > {self.pyramid_levels} levels")
 
@@ -306,13 +314,15 @@ class VOConfig:
         top_fields = {f.name for f in dataclasses.fields(cls)}
         for key, value in data.items():
             if key not in top_fields:
-                raise InputError(f"unknown configuration key {key!r}", path=path)
+                raise InputError(f"unknown configuration key {_short(key)}", path=path)
             if key in sub_types:
                 if isinstance(value, sub_types[key]):
                     kwargs[key] = value
                     continue
+                if value is None:  # an empty section ("tracker:" with every key commented out)
+                    value = {}
                 if not isinstance(value, dict):
-                    raise InputError(f"configuration section {key!r} must be a mapping", path=path)
+                    raise InputError(f"configuration section {_short(key)} must be a mapping", path=path)
                 kwargs[key] = _build(sub_types[key], value, key, path)
             else:
                 kwargs[key] = _coerce(cls, key, value, key, path)
@@ -324,22 +334,12 @@ class VOConfig:
     @classmethod
     def from_yaml(cls, path: str | Path) -> VOConfig:
         """Read a YAML file with optional sections ``tracker``, ``depth``, ``keyframe`` and top-level keys."""
-        import yaml
+        from dmtrack.io.trajectory import read_text_file
 
         p = Path(path)
-        try:
-            text = p.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read configuration: {exc.strerror}", path=p) from None
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            line = None
-            mark = getattr(exc, "problem_mark", None)
-            if mark is not None:
-                line = mark.line + 1
-            raise InputError(f"invalid YAML: {exc}", path=p, line=line) from None
-        return cls.from_dict(data or {}, path=p)
+        text = read_text_file(p, "configuration file")
+        data = _load_yaml(text, p)
+        return cls.from_dict({} if data is None else data, path=p)
 
     def with_overrides(self, *overrides: str) -> VOConfig:
         """Return a copy with ``"section.key=value"`` (or ``"key=value"``) overrides applied.
@@ -351,23 +351,42 @@ class VOConfig:
         data = self.to_dict()
         for item in overrides:
             if "=" not in item:
-                raise InputError(f"override {item!r} is not of the form key=value")
+                raise InputError(f"override {_short(item)} is not of the form key=value")
             key, raw = item.split("=", 1)
             parts = key.strip().split(".")
             try:
                 value = yaml.safe_load(raw)
-            except yaml.YAMLError:
-                raise InputError(f"override {item!r}: cannot parse value") from None
+            except (yaml.YAMLError, ValueError, TypeError, OverflowError, RecursionError):
+                raise InputError(f"override {_short(item)}: cannot parse value") from None
             node = data
             for part in parts[:-1]:
                 if part not in node or not isinstance(node[part], dict):
-                    raise InputError(f"override {item!r}: unknown section {part!r}")
+                    raise InputError(f"override {_short(item)}: unknown section {_short(part)}")
                 node = node[part]
             if parts[-1] not in node:
                 hint = RENAMED_KEYS.get(".".join(p.strip() for p in parts))
-                raise InputError(f"override {item!r}: {hint or f'unknown key {parts[-1]!r}'}")
+                raise InputError(f"override {_short(item)}: {hint or f'unknown key {_short(parts[-1])}'}")
             node[parts[-1]] = value
         return VOConfig.from_dict(data)
+
+
+def _load_yaml(text: str, path: Path) -> Any:
+    """``yaml.safe_load`` with every failure as one line naming the file (and the line where YAML knows it)."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = None if mark is None else mark.line + 1
+        problem = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        reason = " ".join(f"{problem}{f' ({context})' if context else ''}".split())
+        raise InputError(f"invalid YAML: {reason}", path=path, line=line) from None
+    except RecursionError:
+        raise InputError("invalid YAML: nested too deeply", path=path) from None
+    except (ValueError, TypeError, OverflowError) as exc:  # e.g. a date that does not exist, 2001-02-30
+        raise InputError(f"invalid YAML: {' '.join(str(exc).split())[:100]}", path=path) from None
 
 
 def _coerce(cls: type, name: str, value: Any, where: str, path: str | Path | None) -> Any:
@@ -380,21 +399,39 @@ def _coerce(cls: type, name: str, value: Any, where: str, path: str | Path | Non
         return None
     if isinstance(default, bool):
         if not isinstance(value, bool):
-            raise InputError(f"{where} must be true/false, not {value!r}", path=path)
+            raise InputError(f"{where} must be true/false, not {_short(value)}", path=path)
         return value
     if isinstance(default, int):
         if isinstance(value, bool) or not isinstance(value, int):
-            raise InputError(f"{where} must be an integer, not {value!r}", path=path)
+            raise InputError(f"{where} must be an integer, not {_short(value)}", path=path)
         return value
     if isinstance(default, float):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"{where} must be a number, not {value!r}", path=path)
-        return float(value)
+            raise InputError(f"{where} must be a number, not {_short(value)}", path=path)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond the float range
+            number = math.inf
+        if not math.isfinite(number):
+            raise InputError(f"{where} must be a finite number, not {_short(value)}", path=path)
+        return number
     if isinstance(default, tuple):
         if not isinstance(value, (list, tuple)):
-            raise InputError(f"{where} must be a list, not {value!r}", path=path)
+            raise InputError(f"{where} must be a list, not {_short(value)}", path=path)
+        if all(isinstance(d, int) for d in default) and not all(
+            isinstance(v, int) and not isinstance(v, bool) for v in value
+        ):
+            raise InputError(f"{where} must be a list of integers, not {_short(value)}", path=path)
         return tuple(value)
     return value
+
+
+def _short(value: Any, n: int = 60) -> str:
+    """``repr(value)`` cut to ``n`` characters (a message stays one short line)."""
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):  # np.float64(2.0) → 2.0
+        value = value.item()
+    text = repr(value)
+    return text if len(text) <= n else text[: n - 1] + "…"
 
 
 def _build(cls: type, data: dict[str, Any], section: str, path: str | Path | None) -> Any:

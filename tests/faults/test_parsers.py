@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, event, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from dmtrack.datasets.euroc import camera_from_sensor_yaml, read_groundtruth_csv, read_image_list, read_sensor_yaml
@@ -322,6 +322,7 @@ def _sane_calibration(cal: CalibrationFile) -> None:
 
 @FUZZ
 @given(data=fuzzed(DSO_CAMERA + [c.replace("640 480", "64 48").replace("1280 1024", "128 96") for c in DSO_CAMERA]))
+@example(data=b"KannalaBrandt 1e-320 0.3 0.5 0.5 0.01 0.002 0 0\n100 80\nfull\n96 80\n")  # found at 1,000: overflow
 def test_dso_camera_txt(scratch: Path, fault_log, data: bytes) -> None:
     _run(scratch, fault_log, "TUM monoVO camera.txt reader", data, lambda p: read_calibration_file(p, "dso"),
          _sane_calibration, name="camera.txt")
@@ -329,6 +330,7 @@ def test_dso_camera_txt(scratch: Path, fault_log, data: bytes) -> None:
 
 @FUZZ
 @given(data=fuzzed(LSD_CAMERA + [c.replace("640 480", "64 48") for c in LSD_CAMERA]))
+@example(data=b"0.527334 0.827306 0.473568 0.499436 1e-320\n64 48\ncrop\n64 48\n")  # found at 1,000: 1/tan(ω/2)
 def test_lsdslam_camera_cfg(scratch: Path, fault_log, data: bytes) -> None:
     _run(scratch, fault_log, "LSD-SLAM cameraCalibration.cfg reader", data,
          lambda p: read_calibration_file(p, "lsdslam"), _sane_calibration, name="cameraCalibration.cfg")

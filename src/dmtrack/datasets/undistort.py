@@ -61,6 +61,9 @@ from dmtrack.geometry.distortion import (
 )
 from dmtrack.io.trajectory import Trajectory, read_text_file
 
+MIN_FOCAL_PX = 1e-3  # smaller focal lengths (in pixels) are a broken calibration, not a lens
+MIN_FOV_OMEGA = 1e-9  # a FOV model with |ω| below this is a pinhole to double precision (and 1/tan(ω/2) overflows)
+
 __all__ = [
     "CalibrationFile",
     "OutputMode",
@@ -184,7 +187,7 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
         if len(pars) == 8:
             kind = "radtan"
         elif len(pars) == 5:
-            kind = "fov" if (pars[4] != 0.0 or flavour == "lsdslam") else "pinhole"
+            kind = "fov" if (abs(pars[4]) >= MIN_FOV_OMEGA or flavour == "lsdslam") else "pinhole"
         else:
             raise InputError(
                 f"expected 5 numbers (FOV 'fx fy cx cy omega') or 8 numbers (OpenCV 'fx fy cx cy k1 k2 p1 p2'), "
@@ -204,9 +207,12 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
     elif cx < 1.0:  # LSD-SLAM's UndistorterOpenCV auto-conversion (no -0.5)
         relative = True
         fx, fy, cx, cy = fx * in_w, fy * in_h, cx * in_w, cy * in_h
+    if not min(fx, fy) >= MIN_FOCAL_PX:
+        raise InputError(f"camera parameters: focal lengths fx = {fx:g}, fy = {fy:g} pixels; they must be at least "
+                         f"{MIN_FOCAL_PX:g}", path=path, line=1)
     try:
         model: CameraModel
-        if kind == "pinhole" or (kind == "fov" and pars[4] == 0.0):
+        if kind == "pinhole" or (kind == "fov" and abs(pars[4]) < MIN_FOV_OMEGA):
             model = PinholeModel(fx, fy, cx, cy, in_w, in_h)
         elif kind == "fov":
             model = FOVModel(fx, fy, cx, cy, in_w, in_h, omega=pars[4])
@@ -232,6 +238,9 @@ def read_calibration_file(path: str | Path, flavour: Literal["dso", "lsdslam"] =
             )
         check_range(vals, "output calibration", path, 3)
         ofx, ofy, ocx, ocy = vals[:4]
+        if not min(ofx * out_w, ofy * out_h) >= MIN_FOCAL_PX:
+            raise InputError(f"output calibration: focal lengths of {ofx * out_w:g}, {ofy * out_h:g} pixels; they must "
+                             f"be at least {MIN_FOCAL_PX:g}", path=path, line=3)
         if ocx > 1 or ocy > 1:
             raise InputError("output calibration must be relative to the output size (cx, cy < 1)",
                              path=path, line=3)

@@ -329,19 +329,21 @@ def _track_many(
     except (KeyboardInterrupt, OutputError) as e:  # stop here; what is finished is saved, then e is re-raised
         halted_by = e
     finally:
-        for fut in pending:
-            fut.cancel()
-        pool.shutdown(wait=True)
-        for vo in vos:
-            try:
-                vo.finish()  # closes the sink: finished results reach disk even on an error
-            except OutputError as e:  # e.g. the point cloud on a full disk: keep the poses, report the file
-                halted_by = halted_by or e
-            results.append(vo.result())
-        if bar is not None:
-            bar.close()
-        stops.__exit__()
-        halted_by = halted_by or stops.exception()
+        try:
+            for fut in pending:
+                fut.cancel()
+            pool.shutdown(wait=True)
+            for vo in vos:
+                try:
+                    vo.finish()  # closes the sink: finished results reach disk even on an error
+                except OutputError as e:  # e.g. the point cloud on a full disk: keep the poses, report the file
+                    halted_by = halted_by or e
+                results.append(vo.result())
+            if bar is not None:
+                bar.close()
+        finally:
+            stops.__exit__()  # the caller's signal handlers are back, whatever happened above
+    halted_by = halted_by or stops.exception()
     wall = time.perf_counter() - t_start
 
     if r_l is None:

@@ -92,3 +92,22 @@ def test_kill_9_keeps_every_written_frame(tmp_path: Path, fault_log) -> None:
     assert [p for p in out.rglob("*") if p.name.endswith(".tmp")] == []
     fault_log.tried("dmtrack run", "SIGKILL")
     fault_log.kept("dmtrack run", "SIGKILL", finished=seen, kept=min(len(lines), seen))
+
+
+def test_signal_handlers_are_restored_after_a_run(tmp_path: Path) -> None:
+    """The between-frames stop wraps SIGINT only while tracking; the caller's handler is back afterwards."""
+    from dmtrack.outputs import MemorySink
+    from dmtrack.pipeline import track
+
+    class Failing(MemorySink):
+        def on_frame(self, frame_index, timestamp, T_wc):  # noqa: ANN001, ANN202
+            if frame_index == 2:
+                raise RuntimeError("a sink that breaks at frame 2")
+            super().on_frame(frame_index, timestamp, T_wc)
+
+    before = signal.getsignal(signal.SIGINT)
+    track("synthetic:n_frames=4,width=160,height=128", max_frames=4)
+    assert signal.getsignal(signal.SIGINT) is before
+    with pytest.raises(RuntimeError, match="breaks at frame 2"):  # an error in the middle of the loop
+        track("synthetic:n_frames=4,width=160,height=128", sink=Failing())
+    assert signal.getsignal(signal.SIGINT) is before

@@ -105,6 +105,9 @@ def test_signal_handlers_are_restored_after_a_run(tmp_path: Path) -> None:
                 raise RuntimeError("a sink that breaks at frame 2")
             super().on_frame(frame_index, timestamp, T_wc)
 
+        def close(self) -> None:  # and again while the odometry finishes
+            raise RuntimeError("a sink that breaks at frame 2 and on close")
+
     before = signal.getsignal(signal.SIGINT)
     track("synthetic:n_frames=4,width=160,height=128", max_frames=4)
     assert signal.getsignal(signal.SIGINT) is before

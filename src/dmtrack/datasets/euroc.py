@@ -34,8 +34,9 @@ from dmtrack.datasets.undistort import MAX_SIDE, UndistortedSequence, Undistorte
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.distortion import CameraModel, EquidistantModel, PinholeModel, RadTanModel
 from dmtrack.geometry.lie import quaternion_to_matrix
+from dmtrack.io.files import read_text_file
 from dmtrack.io.images import read_image
-from dmtrack.io.trajectory import Trajectory, read_text_file
+from dmtrack.io.trajectory import Trajectory
 
 FORMAT = "euroc"
 CAMERAS = ("cam0", "cam1")

@@ -34,7 +34,8 @@ import numpy as np
 from dmtrack.datasets.base import FileSequence
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import check_file, read_text_file, read_tum
+from dmtrack.io.files import check_file, read_text_file
+from dmtrack.io.trajectory import read_tum
 
 FORMAT = "icl-nuim"
 FPS = 30.0

@@ -10,7 +10,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import read_text_file
+from dmtrack.io.files import read_text_file
 
 #: Largest magnitude accepted for a camera parameter read from a file (focal lengths, principal point, distortion
 #: coefficients): real cameras are far below it, and larger values only overflow later computations.

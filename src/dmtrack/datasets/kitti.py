@@ -23,8 +23,9 @@ from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.intrinsics import check_range
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
+from dmtrack.io.files import read_text_file
 from dmtrack.io.images import read_image
-from dmtrack.io.trajectory import read_kitti, read_text_file, read_times
+from dmtrack.io.trajectory import read_kitti, read_times
 
 FORMAT = "kitti"
 CAMERAS = ("image_0", "image_1", "image_2", "image_3")

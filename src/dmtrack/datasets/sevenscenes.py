@@ -18,7 +18,7 @@ from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_file
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import read_text_file
+from dmtrack.io.files import read_text_file
 
 FORMAT = "7scenes"
 FPS = 30.0

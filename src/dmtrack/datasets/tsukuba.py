@@ -47,7 +47,7 @@ from dmtrack.datasets.base import FileSequence
 from dmtrack.datasets.imagefolder import list_images
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import check_file, read_text_file
+from dmtrack.io.files import check_file, read_text_file
 
 FORMAT = "tsukuba"
 ILLUMINATIONS = ("daylight", "fluorescent", "lamps", "flashlight")

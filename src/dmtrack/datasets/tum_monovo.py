@@ -43,8 +43,8 @@ from dmtrack.datasets.base import LoaderSequence
 from dmtrack.datasets.undistort import Undistorter, read_calibration_file
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.lie import quaternion_to_matrix
+from dmtrack.io.files import check_file, read_text_file
 from dmtrack.io.images import read_image
-from dmtrack.io.trajectory import check_file, read_text_file
 
 FORMAT = "tum-monovo"
 _IMAGE_EXT = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")

@@ -29,7 +29,8 @@ from dmtrack.datasets.intrinsics import find_intrinsics_file, read_intrinsics_fi
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.association import associate
-from dmtrack.io.trajectory import read_text_file, read_tum
+from dmtrack.io.files import read_text_file
+from dmtrack.io.trajectory import read_tum
 
 FORMAT = "tum-rgbd"
 WIDTH, HEIGHT = 640, 480

@@ -59,7 +59,8 @@ from dmtrack.geometry.distortion import (
     PinholeModel,
     RadTanModel,
 )
-from dmtrack.io.trajectory import Trajectory, read_text_file
+from dmtrack.io.files import read_text_file
+from dmtrack.io.trajectory import Trajectory
 
 MIN_FOCAL_PX = 1e-3  # smaller focal lengths (in pixels) are a broken calibration, not a lens
 MIN_FOV_OMEGA = 1e-9  # a FOV model with |ω| below this is a pinhole to double precision (and 1/tan(ω/2) overflows)

@@ -24,7 +24,7 @@ from dmtrack.datasets.base import LoaderSequence
 from dmtrack.datasets.intrinsics import read_intrinsics_file
 from dmtrack.datasets.undistort import UndistortedSequence, read_calibration_file, undistort_sequence
 from dmtrack.errors import DatasetError, InputError
-from dmtrack.io.trajectory import read_text_file
+from dmtrack.io.files import read_text_file
 
 FORMAT = "video"
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".flv", ".ts")

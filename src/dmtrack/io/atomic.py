@@ -27,7 +27,8 @@ from dmtrack.errors import OutputError
 TMP_SUFFIX = ".tmp"
 
 
-def _output_error(path: Path, exc: OSError) -> OutputError:
+def output_error(path: str | Path, exc: OSError) -> OutputError:
+    """The :class:`OutputError` of an OS failure while writing ``path`` ("PATH: cannot write: REASON")."""
     reason = exc.strerror or str(exc) or type(exc).__name__
     return OutputError(f"cannot write: {reason}", path, exc.errno)
 
@@ -59,7 +60,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     try:
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
     except OSError as exc:
-        raise _output_error(path, exc) from None
+        raise output_error(path, exc) from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -67,7 +68,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise _output_error(path, exc) from None
+        raise output_error(path, exc) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -84,7 +85,7 @@ def atomic_open(path: str | Path, mode: str = "w", encoding: str | None = "utf-8
             with open(tmp, mode, **kwargs) as f:
                 yield f
         except OSError as exc:
-            raise _output_error(Path(path), exc) from None
+            raise output_error(Path(path), exc) from None
 
 
 def write_text(path: str | Path, text: str) -> None:

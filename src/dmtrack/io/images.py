@@ -12,20 +12,13 @@ import cv2
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.io.files import read_bytes
 
 
 def _imread(path: Path, flags: int) -> np.ndarray:
     path = Path(path)
-    if not path.exists():
-        raise InputError("image file not found", path=path)
-    if path.is_dir():
-        raise InputError("image file expected, but this is a folder", path=path)
     # reading the bytes + imdecode also handles non-ASCII paths.
-    try:
-        with open(path, "rb") as f:
-            data = np.frombuffer(f.read(), dtype=np.uint8)
-    except OSError as e:
-        raise InputError(f"cannot read the image ({e.strerror or e})", path=path) from None
+    data = np.frombuffer(read_bytes(path, "image file"), dtype=np.uint8)
     if data.size == 0:
         raise InputError("image file is empty", path=path)
     try:

@@ -24,49 +24,9 @@ import numpy as np
 from dmtrack.errors import InputError
 from dmtrack.geometry.lie import matrix_to_quaternion, quaternion_to_matrix
 from dmtrack.io.atomic import write_text
+from dmtrack.io.files import read_text_file
 
 _ROTATION_TOL = 1e-2  # max |RᵀR − I| entry accepted as a rotation (files print ~7 digits)
-
-
-# -- text files ----------------------------------------------------------------------------------
-def check_file(path: str | Path, what: str) -> Path:
-    """``path`` if it is an existing file; else an :class:`InputError` saying that the ``what`` is missing or is a
-    folder."""
-    path = Path(path)
-    try:
-        is_dir, exists = path.is_dir(), path.exists()
-    except OSError as e:  # e.g. a parent folder that may not be searched
-        raise InputError(f"cannot read the {what} ({e.strerror or e})", path=path) from None
-    if is_dir:
-        raise InputError(f"{what} expected, but this is a folder", path=path)
-    if not exists:
-        raise InputError(f"{what} not found", path=path)
-    return path
-
-
-def read_text_file(path: str | Path, what: str) -> str:
-    """The text of ``path`` (UTF-8, a byte-order mark is skipped), or an :class:`InputError` naming the file.
-
-    ``what`` names the kind of file in the messages (``"TUM trajectory"``, ``"calibration file"``, …).  A missing
-    file, a folder, an unreadable file (permissions, I/O error) and a file that is not UTF-8 text (binary data, a
-    NUL byte, another encoding such as UTF-16) each give one clear line instead of a traceback.
-    """
-    path = check_file(path, what)
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as e:
-        raise InputError(f"cannot read the {what} ({e.strerror or e})", path=path) from None
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise InputError(
-            f"not a text {what} ({e.reason} at byte {e.start}: not a text file, or not UTF-8)", path=path
-        ) from None
-    nul = text.find("\x00")
-    if nul >= 0:
-        raise InputError(f"not a text {what} (NUL character at position {nul}: not a text file)", path=path)
-    return text
 
 
 def _number(value: Any) -> str:

@@ -334,7 +334,7 @@ class VOConfig:
     @classmethod
     def from_yaml(cls, path: str | Path) -> VOConfig:
         """Read a YAML file with optional sections ``tracker``, ``depth``, ``keyframe`` and top-level keys."""
-        from dmtrack.io.trajectory import read_text_file
+        from dmtrack.io.files import read_text_file
 
         p = Path(path)
         text = read_text_file(p, "configuration file")

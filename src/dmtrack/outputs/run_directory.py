@@ -22,7 +22,7 @@ from typing import IO
 import numpy as np
 
 from dmtrack.errors import OutputError
-from dmtrack.io.atomic import prepare_folder, remove_stale_temporaries
+from dmtrack.io.atomic import output_error, prepare_folder, remove_stale_temporaries
 from dmtrack.io.ply import write_ply
 from dmtrack.io.trajectory import tum_line
 from dmtrack.odometry.sink import KeyframeSnapshot
@@ -39,20 +39,20 @@ class _LineFile:
         try:
             self._f: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115
         except OSError as exc:
-            raise OutputError(f"cannot write: {exc.strerror or exc}", path, exc.errno) from None
+            raise output_error(path, exc) from None
 
     def write(self, text: str) -> None:
         try:
             self._f.write(text)
             self._f.flush()
         except OSError as exc:
-            raise OutputError(f"cannot write: {exc.strerror or exc}", self.path, exc.errno) from None
+            raise output_error(self.path, exc) from None
 
     def close(self) -> None:
         try:
             self._f.close()
         except OSError as exc:
-            raise OutputError(f"cannot write: {exc.strerror or exc}", self.path, exc.errno) from None
+            raise output_error(self.path, exc) from None
 
 
 class RunDirectorySink:

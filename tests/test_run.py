@@ -179,3 +179,19 @@ def test_track_many_equals_separate_runs(sample_dir: Path) -> None:
     assert many[0].trajectory.poses.tobytes() != many[1].trajectory.poses.tobytes()
     with pytest.raises(InputError):
         track_many(sample_dir, "gray", [])
+
+
+def test_run_folder_has_the_groundtruth_of_its_frames(tmp_path, sample_dir):
+    run_to_directory(sample_dir, tmp_path / "run", start=10, max_frames=6, depth_images=False, pointcloud=False)
+    gt = read_tum(tmp_path / "run" / "groundtruth.txt")
+    est = read_tum(tmp_path / "run" / "trajectory.txt")
+    np.testing.assert_array_equal(gt.timestamps, est.timestamps)  # 7-Scenes: a pose for every frame
+    assert len(gt) == 6
+    # a later run on a sequence without ground truth (the same images as a plain image folder) leaves no stale file
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for i in range(4):
+        shutil.copy(sample_dir / f"frame-{i:06d}.color.jpg", folder / f"{i:06d}.jpg")
+    run_to_directory(folder, tmp_path / "run", intrinsics="585,585,320,240", depth_images=False, pointcloud=False)
+    assert (tmp_path / "run" / "metrics.json").is_file()
+    assert not (tmp_path / "run" / "groundtruth.txt").exists()

@@ -28,7 +28,7 @@ from dmtrack.datasets.base import Sequence
 from dmtrack.errors import DmtrackError, InputError, Interrupted, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
 from dmtrack.io.atomic import prepare_folder, write_text
-from dmtrack.io.trajectory import Trajectory
+from dmtrack.io.trajectory import Trajectory, write_tum
 from dmtrack.odometry._fastmath import kernel_target
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.sink import OutputSink
@@ -38,6 +38,8 @@ from dmtrack.outputs.memory import MultiSink
 #: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
 R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
 DEFAULT_R_L = 1.0 / 3.0
+#: First line of a run folder's ``groundtruth.txt``.
+GROUNDTRUTH_HEADER = "ground truth of the run's frames (camera-to-world, TUM format, the dataset's units)"
 #: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one).
 PREFETCH = 2
 
@@ -101,6 +103,8 @@ class RunResult:
         ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
     metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
     vo : the odometry's own summary.
+    groundtruth : the sequence's ground truth over the frames given to the odometry (``None`` without one);
+        written as ``groundtruth.txt`` by :func:`run_to_directory`.
     halted_by : why the run stopped before its last frame other than a tracking loss — an interrupt
         (:class:`KeyboardInterrupt`, :class:`~dmtrack.errors.Interrupted` for SIGTERM) or an output that could
         not be written (:class:`~dmtrack.errors.OutputError`); ``None`` for a run that went to its end.
@@ -117,6 +121,7 @@ class RunResult:
     timings_ms: dict[str, float]
     metrics: dict[str, Any] = field(default_factory=dict)
     vo: VOResult | None = None
+    groundtruth: Trajectory | None = None
     halted_by: BaseException | None = None
 
 
@@ -348,6 +353,7 @@ def _track_many(
 
     if r_l is None:
         r_l = R_L_BY_FORMAT.get(seq.format, DEFAULT_R_L)
+    groundtruth = _groundtruth_span(seq, start, start + max(r.total_frames for r in results))
     out: list[RunResult] = []
     for config, vo_result in zip(configs, results, strict=True):
         processed = max(vo_result.total_frames, 1)
@@ -376,6 +382,7 @@ def _track_many(
             timings_ms=timings,
             vo=vo_result,
             halted_by=halted_by,
+            groundtruth=groundtruth,
         )
         result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
         out.append(result)
@@ -417,6 +424,16 @@ def _interrupt_name(e: BaseException | None) -> str | None:
     if isinstance(e, Interrupted):
         return e.signal_name
     return "SIGINT" if isinstance(e, KeyboardInterrupt) else None
+
+
+def _groundtruth_span(seq: Sequence, start: int, stop: int) -> Trajectory | None:
+    """The ground-truth poses timed within the frames ``start … stop − 1`` (± 10 ms), or ``None``."""
+    gt = seq.groundtruth
+    if gt is None or stop <= start:
+        return None
+    times = np.asarray(seq.timestamps[start:stop], dtype=np.float64)
+    keep = (gt.timestamps >= times.min() - 0.01) & (gt.timestamps <= times.max() + 0.01)
+    return gt[np.nonzero(keep)[0]] if keep.any() else None
 
 
 def metrics_dict(
@@ -513,6 +530,7 @@ def run_to_directory(
     if kwargs.get("seed") is not None:
         config = config.with_overrides(f"seed={int(kwargs.pop('seed'))}")
     write_text(out / "config.yaml", yaml.safe_dump(_plain(config.to_dict()), sort_keys=False))
+    (out / "groundtruth.txt").unlink(missing_ok=True)  # a stale one must not describe this run
     files = RunDirectorySink(out, depth_images=depth_images, pointcloud=pointcloud)
     sink: OutputSink = MultiSink(files, *extra_sinks) if extra_sinks else files
     result = _track(sequence, feature, config, sink=sink, **kwargs)
@@ -520,6 +538,8 @@ def run_to_directory(
     # an interrupted run or one whose point cloud could not be written still gets the metrics of its frames
     try:
         write_text(out / "metrics.json", json.dumps(result.metrics, indent=2) + "\n")
+        if result.groundtruth is not None:
+            write_tum(out / "groundtruth.txt", result.groundtruth, header=GROUNDTRUTH_HEADER)
     except OutputError:
         if result.halted_by is None:
             raise

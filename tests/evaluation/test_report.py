@@ -331,12 +331,12 @@ def test_seeded_tables_show_median_range_and_worst_seed(seeded: Path):
 
 
 def test_seeded_figures_plot_medians_with_ranges(seeded: Path, monkeypatch: pytest.MonkeyPatch):
-    from dmtrack.evaluation.report import _rpe_curves, representatives
+    from dmtrack.evaluation.report import representatives, rpe_curves
     from dmtrack.viz import plots
 
     recs = collect_runs(seeded)
     assert [(r.feature, r.seed) for r in representatives(recs)] == [("gray", 2), ("gray-affine", 0), ("rgb", 1)]
-    curves = {c.label.split()[0]: c for c in _rpe_curves(recs)}
+    curves = {c.label.split()[0]: c for c in rpe_curves(recs)}
     assert curves["gray"].label == "gray [40; 40–40] · 3 seeds"
     per_seed = np.array([json.loads((seeded / "runs" / "s1" / "gray" / f"seed-{s}" / "evaluation.json").read_text())
                          ["rpe_rot_per_length"] for s in range(3)], dtype=float)  # fmt: skip

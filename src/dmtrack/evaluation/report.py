@@ -106,7 +106,7 @@ def _range_text(values: Sequence[Any]) -> str:
     return f"{fmt_value(med, 1)}; {fmt_value(lo, 1)}–{fmt_value(hi, 1)}"
 
 
-def _rpe_curves(records: Sequence[RunRecord]) -> list[Any]:
+def rpe_curves(records: Sequence[RunRecord]) -> list[Any]:
     """One curve per feature: a run's per-length RPE, or with several seeds the per-length median over the
     seeds (lengths L_k matched by k) with the min–max as bounds."""
     from dmtrack.viz.plots import RpeCurve
@@ -173,7 +173,7 @@ def _read_positions(path: Path) -> np.ndarray | None:
         return None
 
 
-def _trajectory_inputs(
+def trajectory_inputs(
     records: Sequence[RunRecord], seeded: bool = False
 ) -> tuple[np.ndarray | None, list[tuple[str, np.ndarray]]]:
     gt = None
@@ -194,7 +194,7 @@ def _trajectory_inputs(
     return gt, estimates
 
 
-_KF_RE = re.compile(r"kf_(\d+)_frame_(\d+)\.png$")
+KEYFRAME_PICTURE_RE = re.compile(r"kf_(\d+)_frame_(\d+)\.png$")
 
 
 def _depth_grid(
@@ -210,7 +210,7 @@ def _depth_grid(
             continue
         items = []
         for p in sorted((r.path / "depth").glob("kf_*.png")):
-            m = _KF_RE.search(p.name)
+            m = KEYFRAME_PICTURE_RE.search(p.name)
             if m:
                 items.append((int(m.group(2)), int(m.group(1)), p))
         if items:
@@ -238,7 +238,7 @@ def _depth_grid(
     return rows, [f"t = {t}" for t in targets]
 
 
-def _common_sequences(cells: Sequence[dict[str, Any]], features: Sequence[str]) -> set[str]:
+def common_sequences(cells: Sequence[dict[str, Any]], features: Sequence[str]) -> set[str]:
     """The sequences where every feature has both RPE values (as in ``overall_averages``)."""
     by = {(c["sequence"], c["feature"]): c for c in cells}
     return {
@@ -249,7 +249,7 @@ def _common_sequences(cells: Sequence[dict[str, Any]], features: Sequence[str]) 
     }  # fmt: skip
 
 
-def _mean_range(cells: Sequence[dict[str, Any]], key: str, weighted: bool = False) -> tuple[float, float] | None:
+def mean_range(cells: Sequence[dict[str, Any]], key: str, weighted: bool = False) -> tuple[float, float] | None:
     """The mean over ``cells`` (with a value of ``key``) of their minima and of their maxima over the seeds;
     ``weighted``: frame-weighted like the timings (cells without ``tracking_ms`` left out)."""
     lo_num = hi_num = den = 0.0
@@ -263,7 +263,7 @@ def _mean_range(cells: Sequence[dict[str, Any]], key: str, weighted: bool = Fals
 
 
 # ================================================================================================ report
-def _machine_text(records: Sequence[RunRecord], bench: dict[str, Any]) -> str:
+def machine_text(records: Sequence[RunRecord], bench: dict[str, Any]) -> str:
     machines = []
     for r in records:
         i = r.info
@@ -367,7 +367,7 @@ def write_report(
             "`results.csv` and `runs/<sequence>/<feature>/seed-<S>/`; `tables/cells.csv` has the median, min, "
             "max and n of every metric per cell.\n"
         )
-    md.append(_machine_text(records, bench) + "\n")
+    md.append(machine_text(records, bench) + "\n")
     planned = bench.get("runs") or []
     finished = {r.key for r in records}
     missing = [k for k in planned if k not in finished]
@@ -533,7 +533,7 @@ def write_report(
         if figures:
             md.append("### Figures\n")
             pts = []
-            common = _common_sequences(drows, dfeatures)
+            common = common_sequences(drows, dfeatures)
             for a, t in zip(averages, timings, strict=True):
                 rot, trans = (a.common_rpe_rot, a.common_rpe_trans) if a.n_common else (a.rpe_rot, a.rpe_trans)
                 if t.total_ms:
@@ -541,9 +541,9 @@ def write_report(
                     if seeded:
                         mine = [c for c in drows if c["feature"] == a.feature]
                         used = [c for c in mine if c["sequence"] in common] if a.n_common else mine
-                        ranges = {"rot_range": _mean_range(used, "rpe_rot_deg_per_m"),
-                                  "trans_range": _mean_range(used, "rpe_trans_angle_deg_per_m"),
-                                  "ms_range": _mean_range(mine, "total_ms", weighted=True)}  # fmt: skip
+                        ranges = {"rot_range": mean_range(used, "rpe_rot_deg_per_m"),
+                                  "trans_range": mean_range(used, "rpe_trans_angle_deg_per_m"),
+                                  "ms_range": mean_range(mine, "total_ms", weighted=True)}  # fmt: skip
                     pts.append(plots.SpeedAccuracy(a.feature, t.total_ms, rot, trans, **ranges))
             note = (
                 f"errors averaged over the {plural(averages[0].n_common, 'sequence')} where every feature has them"
@@ -569,7 +569,7 @@ def write_report(
                              "maxima averaged the same way" if seeded else "") + ".*\n")  # fmt: skip
             for s in dseqs:
                 recs = rec_by_seq[s]
-                curves = _rpe_curves(recs)
+                curves = rpe_curves(recs)
                 if curves:
                     p = figure(lambda s=s, curves=curves, unit=unit: plots.save_rpe_vs_length(
                         root / "figures" / f"rpe_{_slug(s)}.png", curves, f"{s}: RPE against path length", unit),
@@ -582,7 +582,7 @@ def write_report(
                                      "min–max error bars, and the tracked frames as median; min–max"
                                      if seeded else "") + ".*\n")  # fmt: skip
                 reps = representatives(recs) if seeded else recs
-                gt, estimates = _trajectory_inputs(reps, seeded)
+                gt, estimates = trajectory_inputs(reps, seeded)
                 if estimates:
                     p = figure(lambda s=s, gt=gt, estimates=estimates, unit=unit: plots.save_trajectories_topview(
                         root / "figures" / f"trajectory_{_slug(s)}.png", gt, estimates,

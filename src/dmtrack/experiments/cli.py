@@ -168,10 +168,22 @@ def add_report_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``report`` to an ``add_subparsers()`` object; returns its parser."""
     p = subparsers.add_parser(
         "report",
-        help="rebuild a bench folder's report.md, results.csv, tables and figures from its finished runs",
+        help="write report.html of a run folder, or rebuild a bench folder's report.md, tables, figures and "
+        "report.html",
+        description="Write the reports of DIR. For a bench folder (written by `dmtrack bench`: runs/ inside): "
+        "rebuild DIR/report.md, DIR/results.csv, DIR/tables/*.csv and DIR/figures/*.png from its finished runs, "
+        "and write DIR/report.html. For a run folder (written by `dmtrack run --out DIR`: metrics.json inside): "
+        "write DIR/report.html. report.html is one self-contained interactive page (tables, plotly figures, "
+        "embedded pictures) that opens in any browser without a server or network access.",
+        epilog="examples: dmtrack report bench/   ·   dmtrack report out/run1   ·   dmtrack report bench/ --html-only",
     )
-    p.add_argument("bench_dir", metavar="DIR", help="a folder written by `dmtrack bench`")
-    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.add_argument("bench_dir", metavar="DIR", help="a bench folder (`dmtrack bench`) or a run folder (`dmtrack run`)")
+    p.add_argument("--no-figures", action="store_true", help="bench: report.md without figures/*.png")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--no-html", action="store_true", help="bench: do not write report.html")
+    which.add_argument(
+        "--html-only", action="store_true", help="bench: write only report.html (not report.md, CSVs, figures)"
+    )
     p.set_defaults(func=cmd_report)
     return p
 
@@ -251,19 +263,40 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from dmtrack.evaluation.records import collect_runs
-    from dmtrack.evaluation.report import write_report
+    from dmtrack.evaluation.html import folder_kind, write_html_report
 
     root = Path(args.bench_dir)
-    if not (root / "runs").is_dir():
-        raise InputError("not a bench folder (no runs/ inside); create one with `dmtrack bench`", path=root)
-    n = len(collect_runs(root))
-    if n == 0:
-        raise InputError("no finished runs in runs/ (nothing to report)", path=root)
+    if not root.is_dir():
+        raise InputError("not a bench folder or a run folder: no such folder", path=root)
+    try:
+        kind = folder_kind(root)
+    except InputError:
+        raise InputError("not a bench folder (no runs/ inside; create one with `dmtrack bench`) nor a run folder (no "
+                         "metrics.json; create one with `dmtrack run --out DIR`)", path=root) from None  # fmt: skip
 
     def log(line: str) -> None:
         print(f"dmtrack: warning: {line}", file=sys.stderr)
 
-    out = write_report(root, figures=not args.no_figures, log=log)
-    print(f"report: {out} ({n} runs)")
+    if kind == "run":
+        if args.no_html:
+            raise InputError("--no-html: a run folder has only report.html, so there is nothing to write", path=root)
+        out = write_html_report(root, log=log)
+        print(f"report: {out} ({_size(out)})")
+        return 0
+    from dmtrack.evaluation.records import collect_runs
+    from dmtrack.evaluation.report import write_report
+
+    n = len(collect_runs(root))
+    if n == 0:
+        raise InputError("no finished runs in runs/ (nothing to report)", path=root)
+    if not args.html_only:
+        out = write_report(root, figures=not args.no_figures, log=log)
+        print(f"report: {out} ({n} runs)")
+    if not args.no_html:
+        out = write_html_report(root, log=log)
+        print(f"report: {out} ({n} runs, {_size(out)})")
     return 0
+
+
+def _size(path: Any) -> str:
+    return f"{path.stat().st_size / 1e6:.1f} MB"

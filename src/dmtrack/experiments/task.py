@@ -41,7 +41,6 @@ from dmtrack.experiments.store import commit, run_folder
 from dmtrack.io.bench_layout import (
     ERROR_JSON,
     EVALUATION_JSON,
-    GROUNDTRUTH_TXT,
     METRICS_JSON,
     RUN_INFO_JSON,
     write_json,
@@ -262,18 +261,6 @@ class _ProgressSink:
         pass
 
 
-def _groundtruth_in_range(seq: Any, start: int, stop: int) -> Any:
-    gt = seq.groundtruth
-    if gt is None or len(gt) == 0:
-        return None
-    ts = seq.timestamps[start:stop]
-    if len(ts) == 0:
-        return None
-    lo, hi = float(ts.min()), float(ts.max())
-    keep = (gt.timestamps >= lo - 1e-6) & (gt.timestamps <= hi + 1e-6)
-    return gt[keep]
-
-
 def execute_task(task: RunTask) -> Outcome:
     """Run one task and commit its folder; never raises for a failing run (only for an interrupt).
 
@@ -286,7 +273,6 @@ def execute_task(task: RunTask) -> Outcome:
     limit_threads(task.threads)  # first: sizes numba's pool if this process has not imported numba yet
 
     from dmtrack.datasets import open_sequence
-    from dmtrack.io.trajectory import write_tum
     from dmtrack.odometry.config import VOConfig
     from dmtrack.pipeline import run_to_directory
 
@@ -329,12 +315,11 @@ def execute_task(task: RunTask) -> Outcome:
             }
             return record_run(task, tmp, "failed", attempt=attempt, error=error, message=f"{type(e).__name__}: {e}")
 
-        # evaluation details for the report (per-length RPE, Sim(3) alignment) and the ground truth it used
+        # evaluation details for the report (per-length RPE, Sim(3) alignment); run_to_directory wrote the ground
+        # truth it used (groundtruth.txt)
         m = result.metrics
-        stop = spec["start"] + result.total_frames
-        gt = _groundtruth_in_range(seq, spec["start"], stop)
+        gt = result.groundtruth
         if gt is not None:
-            write_tum(tmp / GROUNDTRUTH_TXT, gt)
             try:
                 from dmtrack.evaluation import evaluate
 

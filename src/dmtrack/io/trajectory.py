@@ -309,7 +309,7 @@ def read_kitti(path: str | Path, timestamps: np.ndarray | str | Path | None = No
     return Trajectory(timestamps[rowidx], poses)
 
 
-def _data_lines(path: Path) -> list[str]:
+def data_lines(path: Path) -> list[str]:
     out = []
     for raw in read_text_file(path, "trajectory").splitlines():
         line = raw.split("#", 1)[0].strip()
@@ -349,8 +349,8 @@ def read_trajectory(path: str | Path, format: str | None = None, times: str | Pa
     """
     path = Path(path)
     if format is None:
-        data_lines = _data_lines(path) if path.exists() else []
-        n = len(data_lines[0].replace(",", " ").split()) if data_lines else 8
+        lines = data_lines(path) if path.exists() else []
+        n = len(lines[0].replace(",", " ").split()) if lines else 8
         format = "kitti" if n == 12 else "tum"
     if format == "tum":
         return read_tum(path)

@@ -6,6 +6,11 @@ facade that re-exports :func:`track`, :func:`track_many`, :func:`run_to_director
 :func:`track` runs the odometry and returns a :class:`RunResult`; :func:`run_to_directory` also writes the
 files of ``dmtrack run`` (``trajectory.txt``, ``keyframes.txt``, ``pointcloud.ply``, ``depth/``,
 ``metrics.json``).
+
+Live sources (``camera:N``, ``rtsp://…``; :mod:`dmtrack.datasets.stream`) have no length: their frames are read
+until the source ends, ``max_frames`` is reached or the run is stopped. ``realtime=True`` runs the odometry on the
+newest frame a grabber thread has (a live source as fast as it delivers, a recorded sequence played at its
+timestamps) and drops the frames it had no time for.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 
 from dmtrack import __version__
 from dmtrack.datasets.base import Sequence
+from dmtrack.datasets.stream import EndOfStream, FrameGrabber, live_source
 from dmtrack.errors import DmtrackError, InputError, Interrupted, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
 from dmtrack.io.atomic import prepare_folder, write_text
@@ -109,6 +115,8 @@ class RunResult:
         (:class:`KeyboardInterrupt`, :class:`~dmtrack.errors.Interrupted` for SIGTERM) or an output that could
         not be written (:class:`~dmtrack.errors.OutputError`); ``None`` for a run that went to its end.
         :func:`track` and :func:`run_to_directory` re-raise it once the finished frames are saved.
+    dropped_frames : frames of a ``realtime`` run that the odometry skipped because a newer one had come.
+    realtime : whether the run was a ``realtime`` one.
     """
 
     trajectory: Trajectory
@@ -123,9 +131,11 @@ class RunResult:
     vo: VOResult | None = None
     groundtruth: Trajectory | None = None
     halted_by: BaseException | None = None
+    dropped_frames: int = 0
+    realtime: bool = False
 
 
-def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | None) -> Sequence:
+def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | Path | None) -> Sequence:
     if isinstance(sequence, (str, Path)):
         from dmtrack.datasets import open_sequence
 
@@ -149,22 +159,31 @@ def track(
     seed: int | None = None,
     sink: OutputSink | None = None,
     format: str | None = None,
-    intrinsics: str | None = None,
+    intrinsics: str | Path | None = None,
     r_l: float | None = None,
     progress: bool | None = False,
+    realtime: bool = False,
 ) -> RunResult:
     """Track ``sequence`` with ``feature``.
 
     Parameters
     ----------
-    sequence : a path (any format :func:`dmtrack.datasets.open_sequence` reads) or a Sequence.
+    sequence : a path (any format :func:`dmtrack.datasets.open_sequence` reads, a live source ``camera:N`` /
+        ``rtsp://…`` included) or a Sequence.
     feature : a registry name (``dmtrack features``) or a Feature object.
     config : odometry parameters (LSD-SLAM defaults when None).
-    start, max_frames : process frames ``start … start + max_frames − 1``.
+    start, max_frames : process frames ``start … start + max_frames − 1`` (of a live source: the frames it
+        delivers, until it ends when ``max_frames`` is None).
     seed : seed of the random depth initialisation (overrides ``config.seed``).
     sink : receives poses / keyframes / losses as they happen (e.g. :class:`RunDirectorySink`).
+    intrinsics : ``"fx,fy,cx,cy"`` or a calibration file (see :func:`dmtrack.datasets.open_sequence`).
     r_l : RPE length ratio for the metrics (default: 1/20 for KITTI, 1/3 otherwise).
     progress : show a progress bar (None: only on a terminal).
+    realtime : track at the speed frames come: a grabber thread reads them (a live source as fast as it
+        delivers, a recorded sequence played at its timestamps against the wall clock) and the odometry always
+        takes the newest one; frames it had no time for are dropped and counted (``dropped_frames``).  Which
+        frames are dropped depends on the machine and its load, so realtime runs are **not** deterministic
+        (without it, results are byte-identical run to run).
 
     Raises
     ------
@@ -173,7 +192,7 @@ def track(
     """
     result = _track(
         sequence, feature, config, start=start, max_frames=max_frames, seed=seed, sink=sink, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress,
+        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime,
     )
     _raise_halt([result])
     return result
@@ -210,9 +229,10 @@ def track_many(
     max_frames: int | None = None,
     sinks: list[OutputSink | None] | None = None,
     format: str | None = None,
-    intrinsics: str | None = None,
+    intrinsics: str | Path | None = None,
     r_l: float | None = None,
     progress: bool | None = False,
+    realtime: bool = False,
 ) -> list[RunResult]:
     """Track ``sequence`` with one feature and several odometry configurations in lockstep.
 
@@ -230,10 +250,75 @@ def track_many(
     """
     results = _track_many(
         sequence, feature, configs, start=start, max_frames=max_frames, sinks=sinks, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress,
+        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime,
     )
     _raise_halt(results)
     return results
+
+
+class _Prefetched:
+    """Frames ``start … stop − 1`` (``stop=None``: until a live source ends) loaded by one background thread, in
+    order, at most :data:`PREFETCH` frames ahead; the odometry consumes them in order, so results are the same as
+    loading them inline."""
+
+    def __init__(self, load: Any, start: int, stop: int | None) -> None:
+        self._load = load
+        self._start, self._stop = start, stop
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
+        self._pending: deque[Future] = deque()
+        self.delivered = 0
+        self.dropped = 0
+
+    def __iter__(self) -> Any:
+        nxt = i = self._start
+        while self._stop is None or i < self._stop:
+            while (self._stop is None or nxt < self._stop) and len(self._pending) <= PREFETCH:
+                self._pending.append(self._pool.submit(self._load, nxt))
+                nxt += 1
+            try:
+                item = self._pending.popleft().result()
+            except EndOfStream:  # a live source ended
+                return
+            self.delivered += 1
+            yield i, item
+            i += 1
+
+    def close(self) -> None:
+        for fut in self._pending:
+            fut.cancel()
+        self._pool.shutdown(wait=True)
+
+
+class _Realtime:
+    """The newest frame of a :class:`~dmtrack.datasets.stream.FrameGrabber` each time the odometry is ready;
+    ``prepare`` (crop + feature) runs on the calling thread. Stops when the grabber ends or ``should_stop()``."""
+
+    def __init__(self, seq: Sequence, start: int, stop: int | None, live: bool, prepare: Any, should_stop: Any):
+        self._grabber = FrameGrabber(seq.__getitem__, start, stop, None if live else seq.timestamps)
+        self._prepare = prepare
+        self._should_stop = should_stop
+
+    @property
+    def delivered(self) -> int:
+        return self._grabber.delivered
+
+    @property
+    def dropped(self) -> int:
+        return self._grabber.dropped
+
+    def __iter__(self) -> Any:
+        self._grabber.start()
+        while True:
+            item = self._grabber.take(timeout=0.05)
+            if item is None:
+                if self._grabber.finished or self._should_stop():
+                    return
+                continue
+            i, frame, read_s = item
+            yield i, self._prepare(frame, read_s)
+
+    def close(self) -> None:
+        self._grabber.close()
 
 
 def _track_many(
@@ -245,11 +330,12 @@ def _track_many(
     max_frames: int | None = None,
     sinks: list[OutputSink | None] | None = None,
     format: str | None = None,
-    intrinsics: str | None = None,
+    intrinsics: str | Path | None = None,
     r_l: float | None = None,
     progress: bool | None = False,
+    realtime: bool = False,
 ) -> list[RunResult]:
-    """:func:`track_many` without re-raising ``halted_by``."""
+    """:func:`track_many` without re-raising ``halted_by``; a live source is closed when the run ends."""
     if not configs:
         raise InputError("track_many needs at least one configuration")
     if sinks is None:
@@ -257,16 +343,42 @@ def _track_many(
     if len(sinks) != len(configs):
         raise InputError(f"{len(sinks)} sinks for {len(configs)} configurations")
     seq = _open(sequence, format, intrinsics)
+    try:
+        return _track_sequence(seq, feature, configs, start, max_frames, sinks, r_l, progress, realtime)
+    finally:
+        live = live_source(seq)
+        if live is not None:
+            live.close()  # the device is free again, however the run ended
+
+
+def _track_sequence(
+    seq: Sequence,
+    feature: Any,
+    configs: list[VOConfig],
+    start: int,
+    max_frames: int | None,
+    sinks: list[OutputSink | None],
+    r_l: float | None,
+    progress: bool | None,
+    realtime: bool,
+) -> list[RunResult]:
     if seq.camera is None:
         raise InputError(
             f"sequence {seq.name!r} has no intrinsics: pass intrinsics='fx,fy,cx,cy' (--intrinsics) or add camera.txt"
         )
-    n = len(seq)
-    if not 0 <= start < n:
-        raise InputError(f"start frame {start} is outside the sequence (0..{n - 1})")
+    live = live_source(seq) is not None
     if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames must be ≥ 1, got {max_frames}")
-    stop = n if max_frames is None else min(n, start + max_frames)
+    stop: int | None
+    if live:  # no length: read until the source ends, or max_frames
+        if start < 0:
+            raise InputError(f"start frame {start} must be ≥ 0")
+        stop = None if max_frames is None else start + max_frames
+    else:
+        n = len(seq)
+        if not 0 <= start < n:
+            raise InputError(f"start frame {start} is outside the sequence (0..{n - 1})")
+        stop = n if max_frames is None else min(n, start + max_frames)
     feat = _feature(feature)
     configs = [_for_feature(c, feat) for c in configs]
     n_levels = configs[0].pyramid_levels
@@ -285,47 +397,52 @@ def _track_many(
             raise InputError(
                 f"init='groundtruth': the depth images of {seq.name!r} are not registered to the colour camera"
             )
+    first = [True]  # the first frame prepared is the first one the odometry gets (its depth initialises it)
 
-    def load(i: int) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
-        # read + decode + crop + feature of frame i (runs on the prefetch thread; cv2 and the numba kernels
-        # release the GIL, so this overlaps with the odometry of the previous frame)
-        t0 = time.perf_counter()
-        frame = seq[i]
+    def prepare(frame: Any, t0: float) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
+        # crop + feature of a frame whose reading started at perf_counter() == t0 (the io time runs to the end of
+        # the crop); cv2 and the numba kernels release the GIL
         image = crop_image(frame.image, box)
         t1 = time.perf_counter()
         fmap = feat.compute_pyramid(image, n_levels) if recompute else feat.compute(image)
         t2 = time.perf_counter()
         depth = None
-        if init_depth and i == start:
+        if init_depth and first[0]:
             if frame.depth is None:
-                raise InputError(f"init='groundtruth': frame {i} of {seq.name!r} has no depth image")
+                raise InputError(f"init='groundtruth': frame {frame.index} of {seq.name!r} has no depth image")
             depth = crop_image(frame.depth, box)
+        first[0] = False
         return frame.timestamp, image, fmap, t1 - t0, t2 - t1, depth
+
+    def load(i: int) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
+        # read + decode + crop + feature of frame i (on the prefetch thread, overlapping the odometry of the
+        # previous frame)
+        t0 = time.perf_counter()
+        frame = seq[i]
+        return prepare(frame, t0)
+
+    def prepare_grabbed(frame: Any, read_s: float) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
+        return prepare(frame, time.perf_counter() - read_s)  # read in read_s seconds by the grabber thread
 
     t_io = t_feat = 0.0
     t_start = time.perf_counter()
-    bar = _progress(stop - start, seq.name, feat.name, progress)
-    # frames are loaded by one background thread, in order, at most PREFETCH frames ahead; the odometry
-    # consumes them in order, so results are the same as loading them inline
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
-    pending: deque[Future] = deque()
-    nxt = start
+    bar = _progress(None if stop is None else stop - start, seq.name, feat.name, progress)
     results: list[VOResult] = []
     halted_by: BaseException | None = None
     stops = _StopBetweenFrames().__enter__()
+    frames: _Prefetched | _Realtime = (
+        _Realtime(seq, start, stop, live, prepare_grabbed, lambda: stops.pending is not None) if realtime
+        else _Prefetched(load, start, stop)
+    )
     try:
-        for i in range(start, stop):
-            while nxt < stop and len(pending) <= PREFETCH:
-                pending.append(pool.submit(load, nxt))
-                nxt += 1
-            timestamp, image, fmap, dt_io, dt_feat, depth = pending.popleft().result()
+        for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames:
             t_io += dt_io
             t_feat += dt_feat
             for vo in vos:
                 if not vo.stopped:
                     vo.process(i, timestamp, image, fmap, depth)
             if bar is not None:
-                bar.update(1)
+                bar.update(i + 1 - start - bar.n)
                 bar.set_postfix_str(f"kf {vos[0].n_keyframes}", refresh=False)
             if all(vo.stopped for vo in vos):
                 break
@@ -335,9 +452,7 @@ def _track_many(
         halted_by = e
     finally:
         try:
-            for fut in pending:
-                fut.cancel()
-            pool.shutdown(wait=True)
+            frames.close()  # the prefetch or grabber thread has ended when this returns
             for vo in vos:
                 try:
                     vo.finish()  # closes the sink: finished results reach disk even on an error
@@ -350,10 +465,14 @@ def _track_many(
             stops.__exit__()  # the caller's signal handlers are back, whatever happened above
     halted_by = halted_by or stops.exception()
     wall = time.perf_counter() - t_start
+    # a live source has as many frames as it delivered; a recorded one, those of the range
+    total = frames.delivered if live else stop - start
+    # the frames read: in order up to the last processed one, or (realtime) up to the last one grabbed
+    span = frames.delivered if realtime else max(r.total_frames for r in results)
 
     if r_l is None:
         r_l = R_L_BY_FORMAT.get(seq.format, DEFAULT_R_L)
-    groundtruth = _groundtruth_span(seq, start, start + max(r.total_frames for r in results))
+    groundtruth = None if live else _groundtruth_span(seq, start, start + span)
     out: list[RunResult] = []
     for config, vo_result in zip(configs, results, strict=True):
         processed = max(vo_result.total_frames, 1)
@@ -375,7 +494,7 @@ def _track_many(
             trajectory=traj,
             keyframes=kfs,
             frame_indices=vo_result.indices,
-            total_frames=stop - start,
+            total_frames=total,
             tracked_frames=vo_result.tracked_frames,
             lost_at=vo_result.lost_at,
             lost_reason=vo_result.lost[0][1] if vo_result.lost else None,
@@ -383,6 +502,8 @@ def _track_many(
             vo=vo_result,
             halted_by=halted_by,
             groundtruth=groundtruth,
+            dropped_frames=int(frames.dropped),
+            realtime=bool(realtime),
         )
         result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
         out.append(result)
@@ -402,7 +523,7 @@ def _for_feature(config: VOConfig, feat: Any) -> VOConfig:
     return config
 
 
-def _progress(total: int, name: str, feature: str, enabled: bool | None):  # noqa: ANN202
+def _progress(total: int | None, name: str, feature: str, enabled: bool | None):  # noqa: ANN202
     if enabled is False:
         return None
     from tqdm import tqdm
@@ -427,12 +548,12 @@ def _interrupt_name(e: BaseException | None) -> str | None:
 
 
 def _groundtruth_span(seq: Sequence, start: int, stop: int) -> Trajectory | None:
-    """The ground-truth poses timed within the frames ``start … stop − 1`` (± 10 ms), or ``None``."""
+    """The ground-truth poses timed within the frames ``start … stop − 1`` (± 1 µs), or ``None``."""
     gt = seq.groundtruth
-    if gt is None or stop <= start:
+    if gt is None or len(gt) == 0 or stop <= start:
         return None
     times = np.asarray(seq.timestamps[start:stop], dtype=np.float64)
-    keep = (gt.timestamps >= times.min() - 0.01) & (gt.timestamps <= times.max() + 0.01)
+    keep = (gt.timestamps >= times.min() - 1e-6) & (gt.timestamps <= times.max() + 1e-6)
     return gt[np.nonzero(keep)[0]] if keep.any() else None
 
 
@@ -448,6 +569,7 @@ def metrics_dict(
     """The ``metrics.json`` contents (keys of conventions.md, plus more).
 
     ``fps`` is frames processed per second of the whole loop (reading, features, tracking, mapping);
+    ``dropped_frames`` counts the frames a ``realtime`` run skipped (0 otherwise);
     ``*_ms`` are means per processed frame; ``feature_ms`` includes building the feature pyramid.
     RPE values are per unit of the ground truth's length (metres for every real dataset here; centimetres for
     New Tsukuba).
@@ -463,6 +585,8 @@ def metrics_dict(
         "lost_at": None if result.lost_at is None else int(result.lost_at),
         "lost_reason": result.lost_reason,
         "processed_frames": int(processed),
+        "dropped_frames": int(result.dropped_frames),
+        "realtime": bool(result.realtime),
         "interrupted": _interrupt_name(result.halted_by),
         "output_error": str(result.halted_by) if isinstance(result.halted_by, OutputError) else None,
         "fps": _finite(processed / t["wall_s"]) if t["wall_s"] > 0 else None,
@@ -517,9 +641,14 @@ def run_to_directory(
     depth_images: bool = True,
     pointcloud: bool = True,
     extra_sinks: tuple[OutputSink, ...] = (),
+    realtime: bool = False,
     **kwargs: Any,
 ) -> RunResult:
-    """:func:`track` writing the run's files into ``out_dir`` (see :mod:`dmtrack.outputs.run_directory`)."""
+    """:func:`track` writing the run's files into ``out_dir`` (see :mod:`dmtrack.outputs.run_directory`).
+
+    ``realtime=True`` tracks at the speed frames come and drops the frames the odometry had no time for
+    (see :func:`track`; such runs are not deterministic).  ``kwargs`` are those of :func:`track`.
+    """
     import yaml
 
     from dmtrack.outputs.run_directory import RunDirectorySink
@@ -533,7 +662,7 @@ def run_to_directory(
     (out / "groundtruth.txt").unlink(missing_ok=True)  # a stale one must not describe this run
     files = RunDirectorySink(out, depth_images=depth_images, pointcloud=pointcloud)
     sink: OutputSink = MultiSink(files, *extra_sinks) if extra_sinks else files
-    result = _track(sequence, feature, config, sink=sink, **kwargs)
+    result = _track(sequence, feature, config, sink=sink, realtime=realtime, **kwargs)
     result.metrics["points"] = files.n_points
     # an interrupted run or one whose point cloud could not be written still gets the metrics of its frames
     try:

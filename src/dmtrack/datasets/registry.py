@@ -6,7 +6,13 @@ Detection order (first match wins, most specific layouts first): ``7scenes`` (``
 ``icl-nuim`` (``associations.txt`` + ``rgb/``), ``tsukuba`` (``illumination/`` + ``groundtruth/camera_track.txt``),
 ``lsd-slam`` (``cameraCalibration.cfg`` + images), ``image-folder`` (images in the folder or in ``images/``).
 A file with a video extension is a ``video``.  ``synthetic`` is not a folder: ``synthetic`` or
-``synthetic:key=value,…`` (keys of :class:`~dmtrack.datasets.synthetic.SyntheticConfig`).
+``synthetic:key=value,…`` (keys of :class:`~dmtrack.datasets.synthetic.SyntheticConfig`).  ``camera:N``,
+``rtsp://…`` and ``http(s)://…`` are live sources (format ``stream``, :mod:`dmtrack.datasets.stream`); they need
+intrinsics.
+
+Intrinsics given to :func:`open_sequence` replace the dataset's: a :class:`PinholeCamera`, the string
+``"fx,fy,cx,cy"``, or a file — ``fx fy cx cy`` / a 3×3 K (pixels), or a 4-line DSO calibration such as
+``dmtrack calibrate-camera`` writes, whose distortion is then removed from every frame (``undistort_sequence``).
 """
 
 from __future__ import annotations
@@ -23,13 +29,15 @@ from dmtrack.datasets import (
     kitti,
     lsdslam,
     sevenscenes,
+    stream,
     tsukuba,
     tum_monovo,
     tumrgbd,
     video,
 )
 from dmtrack.datasets.base import Sequence
-from dmtrack.datasets.intrinsics import parse_intrinsics
+from dmtrack.datasets.intrinsics import parse_intrinsics, read_intrinsics_file
+from dmtrack.datasets.undistort import UndistortedSequence, read_calibration_file, undistort_sequence
 from dmtrack.errors import DatasetError, InputError
 from dmtrack.geometry.camera import PinholeCamera
 
@@ -61,7 +69,7 @@ READERS: dict[str, Reader] = {
         Reader("video", video.detect, video.open_video, "video file (.mp4, .avi, …; OpenCV)"),
     )
 }
-FORMATS = (*READERS, "synthetic")
+FORMATS = (*READERS, "synthetic", stream.FORMAT)
 
 
 def detect_format(path: str | Path) -> str:
@@ -69,6 +77,8 @@ def detect_format(path: str | Path) -> str:
     p = Path(path)
     if str(path).split(":", 1)[0] == "synthetic":
         return "synthetic"
+    if stream.is_stream(str(path)):
+        return stream.FORMAT
     if not p.exists():
         raise DatasetError("no such file or folder", path=p)
     if not p.is_dir():
@@ -111,34 +121,94 @@ def _parse_synthetic(spec: str) -> dict[str, Any]:
 def open_sequence(
     path: str | Path,
     format: str | None = None,
-    intrinsics: str | PinholeCamera | None = None,
+    intrinsics: str | Path | PinholeCamera | None = None,
     **options: Any,
 ) -> Sequence:
-    """Open the sequence at ``path`` (a folder, or ``synthetic[:key=value,…]``).
+    """Open the sequence at ``path`` (a folder, a video file, ``synthetic[:key=value,…]``, or a live source
+    ``camera:N`` / ``rtsp://…`` / ``http(s)://…``).
 
     Parameters
     ----------
     format : force a format (one of :data:`FORMATS`) instead of detecting it.
-    intrinsics : pinhole intrinsics replacing the dataset's — a camera, or the string ``"fx,fy,cx,cy"``
-        (pixels of the stored images).
-    **options : passed to the reader (e.g. ``camera_folder="image_2"`` for KITTI, ``fps=`` for an image folder).
+    intrinsics : intrinsics replacing the dataset's — a camera, the string ``"fx,fy,cx,cy"`` (pixels of the
+        stored images), or the path of a file: ``fx fy cx cy`` or a 3×3 K, or a 4-line DSO calibration (e.g.
+        written by ``dmtrack calibrate-camera``) whose distortion is then removed from every frame.  Required
+        for a live source.
+    **options : passed to the reader (e.g. ``camera_folder="image_2"`` for KITTI, ``fps=`` for an image folder,
+        ``capture=`` (the ``VideoCapture`` factory) for a live source).
+
+    Raises
+    ------
+    InputError
+        An unreadable sequence, a bad intrinsics string or file, a live source without intrinsics or that
+        cannot be opened.
     """
-    seq = _open(path, format, **options)
-    if intrinsics is not None:
-        if isinstance(intrinsics, str):
-            intrinsics = parse_intrinsics(intrinsics, seq.width, seq.height)
-        elif (intrinsics.width, intrinsics.height) != (seq.width, seq.height):
+    fmt = format or detect_format(path)
+    if fmt == stream.FORMAT and intrinsics is None:
+        raise InputError(f"{path}: a live source has no intrinsics: {stream.CALIBRATE_HINT}")
+    seq = _open(path, fmt, **options)
+    if intrinsics is None:
+        return seq
+    try:
+        return apply_intrinsics(seq, intrinsics)
+    except BaseException:
+        live = stream.live_source(seq)
+        if live is not None:
+            live.close()
+        raise
+
+
+def _is_numbers(text: str) -> bool:
+    """Whether ``text`` is meant as numbers (``fx,fy,cx,cy``) rather than a file name."""
+    fields = text.replace(",", " ").split()
+    try:
+        [float(f) for f in fields]
+    except ValueError:
+        return False
+    return bool(fields)
+
+
+def apply_intrinsics(seq: Any, intrinsics: str | Path | PinholeCamera) -> Any:
+    """``seq`` with the given intrinsics (see :func:`open_sequence`); may return a new, undistorted sequence."""
+    if isinstance(intrinsics, PinholeCamera):
+        if (intrinsics.width, intrinsics.height) != (seq.width, seq.height):
             raise InputError(
                 f"intrinsics are for {intrinsics.width}x{intrinsics.height}, the images are {seq.width}x{seq.height}"
             )
         seq.camera = intrinsics
-        if hasattr(seq, "details"):
-            seq.details["intrinsics_source"] = "given"
+        source = "given"
+    elif isinstance(intrinsics, str) and _is_numbers(intrinsics):
+        seq.camera = parse_intrinsics(intrinsics, seq.width, seq.height)
+        source = "given"
+    else:
+        path = Path(intrinsics).expanduser()
+        if not path.exists():
+            raise InputError(f"--intrinsics {str(intrinsics)!r}: neither four numbers 'fx,fy,cx,cy' nor an existing "
+                             "calibration file")
+        if path.is_dir():
+            raise InputError("--intrinsics: expected a calibration file (fx fy cx cy, a 3x3 K or a 4-line DSO "
+                             "calibration), this is a folder", path=path)
+        from dmtrack.io.files import read_text_file
+
+        lines = [ln for ln in read_text_file(path, "intrinsics file").splitlines() if ln.strip()]
+        if len(lines) >= 4:
+            # a distorted camera: undistort the frames as delivered (an already undistorted sequence is
+            # unwrapped: this calibration replaces the dataset's)
+            base = seq.base if isinstance(seq, UndistortedSequence) else seq
+            seq = undistort_sequence(base, read_calibration_file(path, flavour="dso"))
+        else:
+            seq.camera = read_intrinsics_file(path, seq.width, seq.height)
+        source = str(path)
+    if hasattr(seq, "details"):
+        seq.details["intrinsics_source"] = source
     return seq
 
 
-def _open(path: str | Path, format: str | None, **options: Any) -> Sequence:
-    fmt = format or detect_format(path)
+def _open(path: str | Path, fmt: str, **options: Any) -> Sequence:
+    if fmt == stream.FORMAT:
+        if not stream.is_stream(str(path)):
+            raise InputError(f"{path}: a live source is camera:N, rtsp://…, http://… or https://…")
+        return stream.open_stream(str(path), **options)
     if fmt == "synthetic":
         from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
 

@@ -139,3 +139,37 @@ def test_eval_kitti_groundtruth_against_tum_estimate(capsys: pytest.CaptureFixtu
     assert result["matched_poses"] == n
     assert result["ate_rmse"] == pytest.approx(0.0, abs=1e-9)
     assert result["rpe_trans_angle_deg_per_m"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_run_realtime_on_a_video_reports_dropped_frames(tmp_path: Path, sample_dir: Path, capsys) -> None:
+    import cv2
+
+    video = tmp_path / "walk.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 300.0, (640, 480))
+    for i in range(30):
+        writer.write(cv2.imread(str(sample_dir / f"frame-{i:06d}.color.jpg")))
+    writer.release()
+    out = tmp_path / "run"
+    args = ["run", str(video), "--intrinsics", "585,585,320,240", "--out", str(out), "--no-depth-images"]
+    assert main([*args, "--realtime"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["realtime"] is True
+    assert m["dropped_frames"] > 0  # 300 fps: the odometry cannot take every frame
+    assert m["processed_frames"] + m["dropped_frames"] == m["total_frames"] == 30
+    assert f"realtime: {m['dropped_frames']} frames dropped" in capsys.readouterr().out
+    assert main(args) == 0  # without --realtime every frame is tracked
+    m = json.loads((out / "metrics.json").read_text())
+    assert (m["realtime"], m["dropped_frames"], m["processed_frames"]) == (False, 0, 30)
+
+
+def test_calibrate_camera_is_a_command_with_one_line_errors(tmp_path: Path, capsys) -> None:
+    import cv2
+
+    (tmp_path / "blank").mkdir()
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / "blank" / f"{i}.png"), np.full((120, 160), 128, np.uint8))
+    code = main(["calibrate-camera", str(tmp_path / "blank"), "--board", "9x6", "--square", "0.025",
+                 "--out", str(tmp_path / "camera.txt"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1 and "blank" in err
+    assert not (tmp_path / "camera.txt").exists()

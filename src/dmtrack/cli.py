@@ -22,12 +22,14 @@ from dmtrack.errors import DmtrackError, Interrupted
 def _add_sequence_args(p: argparse.ArgumentParser) -> None:
     from dmtrack.datasets.registry import FORMATS
 
-    p.add_argument("sequence", help="sequence folder, or synthetic[:key=value,...]")
+    p.add_argument("sequence", help="sequence folder or video file, camera:N / rtsp://… / http(s)://… (live), or "
+                   "synthetic[:key=value,...]")
     p.add_argument("--format", choices=FORMATS, help="force the dataset format instead of detecting it")
     p.add_argument(
         "--intrinsics",
-        metavar="FX,FY,CX,CY",
-        help="pinhole intrinsics (pixels of the stored images) replacing or supplying the dataset's",
+        metavar="FX,FY,CX,CY|FILE",
+        help="pinhole intrinsics (pixels of the stored images) replacing or supplying the dataset's, or a "
+        "calibration file (fx fy cx cy, or the DSO file calibrate-camera writes: frames are undistorted with it)",
     )
 
 
@@ -145,9 +147,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
     from dmtrack.features import get_feature
 
+    sequence, viewers = _run_viewers(args)
     try:
         result = run_to_directory(
-            args.sequence,
+            sequence,
             out,
             feature=get_feature(args.feature, **_feature_options(args.feature_opt)),
             config=config,
@@ -160,15 +163,22 @@ def cmd_run(args: argparse.Namespace) -> int:
             depth_images=not args.no_depth_images,
             pointcloud=not args.no_pointcloud,
             progress=None if args.progress is None else args.progress,
+            extra_sinks=viewers,
+            realtime=args.realtime,
         )
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the finished frames and their metrics are saved
         print(f"dmtrack: {_interrupt_text(e)}: the trajectory and metrics of the finished frames are in {out}/",
               file=sys.stderr)
         return _interrupt_code(e)
+    finally:
+        for v in viewers:
+            v.discard()  # only a run that failed before its odometry started has left it open
     m = result.metrics
     lost = "never lost" if m["lost_at"] is None else f"lost at frame {m['lost_at']} ({m['lost_reason']})"
     print(f"{m['sequence']} [{m['feature']}]: tracked {m['tracked_frames']}/{m['total_frames']} frames, {lost}; "
           f"{m['keyframes']} keyframes, {m.get('points', 0)} points")
+    if m.get("realtime"):
+        print(f"realtime: {m['dropped_frames']} frames dropped")
     print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms, "
           f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms)")
     if m.get("ate_rmse") is not None:
@@ -177,7 +187,32 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"(Sim3), {m['matched_poses']} poses")
     elif "evaluation_error" in m:
         print(f"accuracy: not evaluated ({m['evaluation_error']})")
-    print(f"outputs: {out}/")
+    print(f"outputs: {out}/" + (f", recording: {args.rrd}" if args.rrd else ""))
+    return 0
+
+
+def _run_viewers(args: argparse.Namespace) -> tuple[Any, tuple[Any, ...]]:
+    """The sequence to run and, for ``--viewer`` / ``--rrd``, a RerunSink with the sequence's ground truth (opened
+    here once and handed to the run as a Sequence)."""
+    if not (args.viewer or args.rrd):
+        return args.sequence, ()
+    from dmtrack.datasets import open_sequence
+    from dmtrack.evaluation.alignment import umeyama
+    from dmtrack.outputs.rerun_sink import RerunSink
+
+    seq = open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics)
+    return seq, (RerunSink(spawn=args.viewer, rrd=args.rrd, groundtruth=seq.groundtruth, align=umeyama),)
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from dmtrack.evaluation.alignment import umeyama
+    from dmtrack.outputs.rerun_view import log_run_folder
+
+    spawn = args.spawn or not args.rrd
+    info = log_run_folder(args.run_dir, spawn=spawn, rrd=args.rrd, align=umeyama)
+    print(f"{args.run_dir}: {info['poses']} poses, {info['keyframes']} keyframes, {info['points']} points, "
+          f"{info['depth_images']} depth pictures, ground truth {info['groundtruth']}"
+          + (f"; recording: {args.rrd}" if args.rrd else ""))
     return 0
 
 
@@ -342,7 +377,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, metavar="N",
                    help="threads of the kernels and features (default: all cores; 1 is faster when other jobs "
                         "share the cores; results do not depend on it)")
+    p.add_argument("--realtime", action="store_true",
+                   help="track at the speed frames come (a camera as fast as it delivers, a video at its own speed); "
+                        "frames the odometry has no time for are dropped (dropped_frames); not deterministic")
+    p.add_argument("--viewer", action="store_true",
+                   help="show the run live in the Rerun viewer (needs a display and pip install 'dmtrack[viewer]')")
+    p.add_argument("--rrd", metavar="FILE", help="record the live view to a Rerun file (open it with `rerun FILE`)")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("view", help="show a finished run folder in the Rerun viewer, or write it to an .rrd file")
+    p.add_argument("run_dir", metavar="RUN_DIR", help="a folder written by `dmtrack run`")
+    p.add_argument("--rrd", metavar="FILE", help="write a Rerun file instead of opening the viewer")
+    p.add_argument("--spawn", action="store_true", help="also open the viewer when writing --rrd")
+    p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("features", help="list the available features")
     p.add_argument("--json", action="store_true", help="print a JSON list")
@@ -351,6 +398,10 @@ def build_parser() -> argparse.ArgumentParser:
     from dmtrack.datasets.cli_download import add_download_parser
 
     add_download_parser(sub)
+
+    from dmtrack.datasets.cli_calibrate import add_calibrate_parser
+
+    add_calibrate_parser(sub)
 
     def sampling_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--feature", required=True, help="feature name")

@@ -9,6 +9,12 @@ methods):
 * ``on_lost`` when tracking of a frame is lost (diverged, or not good after the first keyframes);
 * ``close`` once at the end.
 
+A sink may also have the **optional** method ``on_frame_info(info)``: it is then called once per processed frame
+(tracked or lost; not for the frames skipped after a loss), after that frame's ``on_frame`` / ``on_lost`` and
+``on_keyframe`` calls, with a :class:`FrameInfo` — the tracker's numbers, the timings and read-only references to
+the frame's image and to the current keyframe's inverse depth, for viewers. The odometry looks the method up once,
+when it is created: a sink without it costs nothing and changes nothing.
+
 The protocol and the snapshot type belong to the odometry (it calls them); the sinks themselves — the run-folder
 writer, :class:`~dmtrack.outputs.memory.MemorySink`, :class:`~dmtrack.outputs.memory.MultiSink` — live in
 :mod:`dmtrack.outputs`, a layer above, so the odometry never imports a writer or a viewer.
@@ -16,7 +22,7 @@ writer, :class:`~dmtrack.outputs.memory.MemorySink`, :class:`~dmtrack.outputs.me
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -58,6 +64,7 @@ class KeyframeSnapshot:
     image: np.ndarray | None
     camera: Any
     n_updates: int = 0
+    _points: list[Any] = field(default_factory=list, init=False, repr=False)  # the last points_world result
 
     @property
     def valid(self) -> np.ndarray:
@@ -83,7 +90,12 @@ class KeyframeSnapshot:
         -------
         points : (M, 3) float64, world coordinates.
         colours : (M, 3) uint8 RGB (grey repeated; mid-grey when there is no image).
+
+        Both arrays are read-only: the result of the last call is kept, so that several sinks (the run folder and
+        a viewer) compute it once.
         """
+        if self._points and self._points[0] == max_var:
+            return self._points[1], self._points[2]
         m = self.valid & (self.idepth > 0)
         if max_var is not None:
             m &= self.idepth_var <= max_var
@@ -99,7 +111,77 @@ class KeyframeSnapshot:
             col = np.repeat(self.image[ys, xs][:, None], 3, axis=1).astype(np.uint8)
         else:
             col = self.image[ys, xs, :3].astype(np.uint8)
+        pts.flags.writeable = False
+        col.flags.writeable = False
+        self._points[:] = [max_var, pts, col]
         return pts, col
+
+
+@dataclass(frozen=True, eq=False)
+class FrameInfo:
+    """What a viewer shows of one processed frame (the argument of the optional ``on_frame_info``).
+
+    The arrays are read-only views of the odometry's own arrays, valid during the call: a sink that keeps one
+    copies it.
+
+    Attributes
+    ----------
+    frame_index, timestamp
+        The frame.
+    image : np.ndarray | None
+        The frame's source uint8 image ((H, W) grey or (H, W, 3) RGB), as given to the odometry.
+    camera : Any
+        The level-0 :class:`~dmtrack.geometry.camera.PinholeCamera`.
+    T_wc : np.ndarray | None
+        (4, 4) SE(3) camera-to-world pose; ``None`` when tracking of the frame was lost.
+    tracked, is_keyframe
+        The frame has a pose; it became a keyframe (the first frame is both).
+    keyframe_id : int
+        The keyframe the frame was tracked against, or the one it became.
+    lost_reason : str | None
+        Why tracking was lost, ``None`` when it was not.
+    residual : float
+        The tracker's error of the last accepted step (``TrackResult.last_residual``); NaN for the first frame.
+    good_count, bad_count : int
+        Good and bad in-image points of the tracker's last evaluation at the finest level (0 for the first frame).
+    point_usage : float
+        The tracker's point usage (NaN for the first frame).
+    pyramid_ms, tracking_ms, mapping_ms : float
+        Wall time of the frame's stages, milliseconds.
+    keyframe_idepth, keyframe_idepth_var : np.ndarray
+        (H, W) float32 inverse depth (keyframe units) and variance of the current keyframe's map after this frame
+        was mapped, as the tracker sees it: −1 (both) where there is no usable hypothesis.
+    keyframe_image : np.ndarray | None
+        The current keyframe's source image.
+    keyframe_frame_index : int
+        The frame that became the current keyframe.
+    """
+
+    frame_index: int
+    timestamp: float
+    image: np.ndarray | None
+    camera: Any
+    T_wc: np.ndarray | None
+    tracked: bool
+    is_keyframe: bool
+    keyframe_id: int
+    lost_reason: str | None
+    residual: float
+    good_count: int
+    bad_count: int
+    point_usage: float
+    pyramid_ms: float
+    tracking_ms: float
+    mapping_ms: float
+    keyframe_idepth: np.ndarray
+    keyframe_idepth_var: np.ndarray
+    keyframe_image: np.ndarray | None
+    keyframe_frame_index: int
+
+    @property
+    def keyframe_valid(self) -> np.ndarray:
+        """(H, W) bool: pixels of the current keyframe with a hypothesis (var > 0)."""
+        return self.keyframe_idepth_var > 0
 
 
 @runtime_checkable
@@ -124,3 +206,5 @@ class OutputSink(Protocol):
 
     def close(self) -> None:
         """No more calls follow."""
+
+    # optional: def on_frame_info(self, info: FrameInfo) -> None — see the module docstring

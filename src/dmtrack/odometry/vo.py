@@ -50,7 +50,7 @@ from dmtrack.errors import InputError
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import Frame, build_frame
-from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
+from dmtrack.odometry.sink import FrameInfo, KeyframeSnapshot, OutputSink
 from dmtrack.odometry.tracker import Tracker, TrackingReference, TrackResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -82,6 +82,15 @@ def _se3_part(S: np.ndarray, s: float) -> np.ndarray:
     T = np.array(S, dtype=np.float64, copy=True)
     T[:3, :3] /= s
     return T
+
+
+def _read_only(a: np.ndarray | None) -> np.ndarray | None:
+    """A read-only view of ``a`` (no copy), so that a sink cannot change the odometry's arrays."""
+    if a is None:
+        return None
+    v = a.view()
+    v.flags.writeable = False
+    return v
 
 
 def _inv_se3(T: np.ndarray) -> np.ndarray:
@@ -196,7 +205,8 @@ class VisualOdometry:
     config : VOConfig, optional
         Parameters (LSD-SLAM defaults).
     sink : OutputSink, optional
-        Receives poses, keyframes and losses as they happen.
+        Receives poses, keyframes and losses as they happen; also a :class:`~dmtrack.odometry.sink.FrameInfo` per
+        processed frame when it has the optional ``on_frame_info`` method (looked up here, once).
     use_numba : bool
         Numba kernels (default) or numpy references (slow; tests only).
     parallel : bool, optional
@@ -232,6 +242,7 @@ class VisualOdometry:
         self.camera = camera
         self.config = config if config is not None else VOConfig()
         self.sink = sink
+        self._on_frame_info = getattr(sink, "on_frame_info", None)  # optional sink method (viewers)
         self.use_numba = use_numba
         self.parallel = bool(parallel)
         self.tracker = Tracker(
@@ -293,13 +304,17 @@ class VisualOdometry:
     ) -> FrameResult:
         """Process one frame (see :meth:`_process`; runs with ``threads`` numba threads if given)."""
         if self.threads is None:
-            return self._process(index, timestamp, image, feature_map, depth)
-        prev = numba.get_num_threads()
-        numba.set_num_threads(self.threads)
-        try:
-            return self._process(index, timestamp, image, feature_map, depth)
-        finally:
-            numba.set_num_threads(prev)
+            result = self._process(index, timestamp, image, feature_map, depth)
+        else:
+            prev = numba.get_num_threads()
+            numba.set_num_threads(self.threads)
+            try:
+                result = self._process(index, timestamp, image, feature_map, depth)
+            finally:
+                numba.set_num_threads(prev)
+        if self._on_frame_info is not None and result.keyframe_id >= 0:
+            self._on_frame_info(self._frame_info(result, image))
+        return result
 
     def _process(
         self,
@@ -498,6 +513,34 @@ class VisualOdometry:
             n_updates=dm.n_updates,
         )
         self.sink.on_keyframe(kf_id, kf.index, kf.timestamp, rec.T_wc.copy(), snap)
+
+    def _frame_info(self, r: FrameResult, image: np.ndarray | None) -> FrameInfo:
+        """The :class:`FrameInfo` of a processed frame: its numbers, and read-only views of the live arrays."""
+        assert self._kf is not None
+        snap = self._snaps[-1]  # the current keyframe's map after this frame was mapped
+        t = r.track
+        return FrameInfo(
+            frame_index=int(r.index),
+            timestamp=float(r.timestamp),
+            image=_read_only(image),
+            camera=self.camera,
+            T_wc=_read_only(r.T_wc),
+            tracked=r.tracked,
+            is_keyframe=r.is_keyframe,
+            keyframe_id=r.keyframe_id,
+            lost_reason=r.lost_reason,
+            residual=float("nan") if t is None else float(t.last_residual),
+            good_count=0 if t is None else int(t.good_count),
+            bad_count=0 if t is None else int(t.bad_count),
+            point_usage=float("nan") if t is None else float(t.point_usage),
+            pyramid_ms=r.pyramid_ms,
+            tracking_ms=r.tracking_ms,
+            mapping_ms=r.mapping_ms,
+            keyframe_idepth=_read_only(snap.idepth),
+            keyframe_idepth_var=_read_only(snap.var),
+            keyframe_image=_read_only(self._kf.image),
+            keyframe_frame_index=int(self._kf.index),
+        )
 
     def _record_pose(self, index: int, timestamp: float, T_wc: np.ndarray) -> None:
         self._indices.append(int(index))

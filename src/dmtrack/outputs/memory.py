@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
+from dmtrack.odometry.sink import FrameInfo, KeyframeSnapshot, OutputSink
 
 
 @dataclass
@@ -39,10 +39,22 @@ class MemorySink:
 
 
 class MultiSink:
-    """Forwards every call to each of ``sinks`` in order."""
+    """Forwards every call to each of ``sinks`` in order.
+
+    The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers) exists only when at
+    least one of ``sinks`` has it, and goes to those; so a fan-out to sinks without it costs the odometry nothing.
+    The children are fixed when the MultiSink is made.
+    """
 
     def __init__(self, *sinks: OutputSink):
         self.sinks = list(sinks)
+        self._info_sinks = [s for s in self.sinks if callable(getattr(s, "on_frame_info", None))]
+        if self._info_sinks:
+            self.on_frame_info = self._forward_frame_info
+
+    def _forward_frame_info(self, info: FrameInfo) -> None:
+        for s in self._info_sinks:
+            s.on_frame_info(info)  # type: ignore[attr-defined]
 
     def on_frame(self, frame_index: int, timestamp: float, T_wc: np.ndarray) -> None:
         for s in self.sinks:

@@ -456,6 +456,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_bench_parser(sub)
     add_report_parser(sub)
+
+    from dmtrack.training.cli import add_train_parser
+
+    add_train_parser(sub)
     return parser
 
 

@@ -1,0 +1,99 @@
+"""``dmtrack train-feature --out DIR [--seed S] [--minutes M] [--steps N] [--channels K] [--data synthetic]``:
+train the ``tracknet`` feature through the tracker's alignment (:mod:`dmtrack.training.train`).
+
+Wire into the CLI with ``add_train_parser(sub)`` where ``sub`` is the subparsers object of
+:func:`dmtrack.cli.build_parser`. PyTorch is imported only when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def cmd_train_feature(args: argparse.Namespace) -> int:
+    try:
+        import torch  # noqa: F401
+    except ModuleNotFoundError:
+        from dmtrack.errors import InputError
+
+        msg = "train-feature needs PyTorch, which is not installed (pip install 'dmtrack[learned]')"
+        raise InputError(msg) from None
+    from dmtrack.training.train import TrainOptions, train
+
+    opts = TrainOptions(
+        seed=args.seed,
+        minutes=args.minutes,
+        steps=args.steps,
+        channels=args.channels,
+        data=args.data,
+        threads=args.threads,
+    )
+
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(msg, file=sys.stderr, flush=True)
+
+    res = train(args.out, opts, progress=say)
+    if args.json:
+        print(json.dumps({"out": str(res.out), "steps": res.steps, "seconds": round(res.seconds, 1),
+                          "validation": res.validation, "files": res.files}, indent=2))  # fmt: skip
+        return 0
+    print(f"trained {res.steps} steps in {res.seconds / 60:.1f} min")
+    for name in ("grey", "initial", "final"):
+        v = res.validation.get(name)
+        if v:
+            print(f"validation ({name}): reprojection error {v['init_px']:.2f} px -> {v['final_px']:.2f} px "
+                  f"(median {v['final_px_median']:.2f}), {100 * v['within_1px']:.0f}% of pairs within 1 px")
+    print(f"written: {res.files['weights']} (use it: dmtrack run SEQUENCE --feature tracknet "
+          f"--feature-opt weights={res.files['weights']})")
+    return 0
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {text!r}")
+    return value
+
+
+def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``train-feature`` subcommand to ``subparsers``; returns its parser."""
+    p = subparsers.add_parser(
+        "train-feature",
+        help="train the tracknet feature through the tracker's own alignment (needs PyTorch)",
+        description="Train the small tracknet CNN by unrolling damped Gauss-Newton steps of the tracker's "
+        "photometric objective on its feature maps and minimising the final pose error, on seeded synthetic "
+        "pairs (exact depth and pose). Writes tracknet.npz (use it with --feature tracknet --feature-opt "
+        "weights=FILE), checkpoint.pt, train_log.csv/json and training_curve.png. Deterministic: the weights after "
+        "N steps depend only on the seed and the options (--minutes stops after a machine-dependent number of "
+        "steps; --steps N reproduces a run).",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
+    p.add_argument("--minutes", type=_positive_float, default=10.0, metavar="M",
+                   help="wall-clock budget of the training loop (default 10)")
+    p.add_argument("--steps", type=_count, metavar="N", help="stop after N steps (whichever comes first)")
+    p.add_argument("--channels", type=_count, default=8, metavar="K", help="output channels K (default 8)")
+    p.add_argument("--data", choices=("synthetic", "7scenes", "both"), default="synthetic",
+                   help="training data (default synthetic; 7scenes and both are not implemented yet)")
+    p.add_argument("--threads", type=_count, default=1, metavar="N",
+                   help="torch and numba threads (default 1: faster than 2 when other jobs share the cores)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=cmd_train_feature)
+    return p

@@ -50,6 +50,7 @@ from dmtrack.odometry._depth_common import (
     _sample,
     bilinear_reference,
 )
+from dmtrack.odometry._fastmath import pin_cached
 
 # ------------------------------------------------------------------------------------------ constants
 #: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
@@ -59,9 +60,14 @@ DIVISION_EPS = 1e-10
 
 
 # ============================================================================== numba kernels
-@numba.njit(**_JIT_FAST)
+@numba.njit(**_JIT)
 def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
-    """(Σ_c ((2 gx_c, 2 gy_c)·ep)², Σ_c |2 ∇F_c|²) of one keyframe pixel (N > 1)."""
+    """(Σ_c ((2 gx_c, 2 gy_c)·ep)², Σ_c |2 ∇F_c|²) of one keyframe pixel (N > 1), in channel order.
+
+    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the ``prange`` body of the observe
+    kernel, where a re-associated sum would round differently in the run that compiles the kernel and in the runs
+    that load it from numba's cache (see :mod:`dmtrack.odometry._fastmath`).
+    """
     dot2 = 0.0
     g2 = 0.0
     for c in range(gxs.shape[0]):
@@ -137,6 +143,10 @@ def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - co
     st[row, 4] = d3
     st[row, 5] = d4
     st[row, 6] = ss
+
+
+# the fast-math loops called (not inlined) by the line stereo: one compiled copy for every process
+pin_cached(_window_cost, _kf_norms, _sample_stats)
 
 
 @numba.njit(**_JIT_INLINE)

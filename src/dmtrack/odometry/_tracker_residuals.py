@@ -19,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-from dmtrack.odometry._fastmath import FASTMATH
+from dmtrack.odometry._fastmath import FASTMATH, pin_cached
 
 #: Columns of the per-point buffer written by :func:`eval_pass`: x', y', z' (point in the frame's camera),
 #: Sxx, Sxy, Syy (Σ_c W g gᵀ), sx, sy (Σ_c W r g); all zero for points outside the image.
@@ -123,6 +123,10 @@ def _channel_sums(
     return (np.float64(err), 0.25 * fx * fx * np.float64(sxx), 0.25 * fx * fy * np.float64(sxy),
             0.25 * fy * fy * np.float64(syy), 0.5 * fx * np.float64(bx), 0.5 * fy * np.float64(by),
             np.float64(r2sum), 0.25 * np.float64(g2sum))  # fmt: skip
+
+
+# the kernels call this fast-math loop (not inlined): one compiled copy for every process, see _fastmath
+pin_cached(_channel_sums)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")

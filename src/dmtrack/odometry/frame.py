@@ -19,7 +19,6 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
-from dmtrack.odometry._fastmath import FASTMATH
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.geometry.camera import PinholeCamera
@@ -205,10 +204,14 @@ def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 # ------------------------------------------------------------------------------------------ numba kernels
-@numba.njit(cache=True, nogil=True, fastmath=set(FASTMATH))
+@numba.njit(cache=True, nogil=True)
 def _magnitude_sum(gx: np.ndarray, gy: np.ndarray) -> np.float32:  # pragma: no cover - compiled
-    """Σ_c sqrt(gx_c² + gy_c²) in float32 (N > 1), vectorised: the summation order is the compiler's (fixed at
-    compile time), so it equals the channel-order sum of :func:`gradients_numpy` up to float32 rounding."""
+    """Σ_c sqrt(gx_c² + gy_c²) in float32 (N > 1), in channel order: the same bits as :func:`gradients_numpy`.
+
+    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the ``prange`` body of
+    :func:`_gradients_kernel`, where a re-associated sum would round differently in the run that compiles the
+    kernel and in the runs that load it from numba's cache (see :mod:`dmtrack.odometry._fastmath`).
+    """
     s = np.float32(0.0)
     for c in range(gx.shape[0]):
         s += np.sqrt(gx[c] * gx[c] + gy[c] * gy[c])

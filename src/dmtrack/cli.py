@@ -17,6 +17,7 @@ from typing import Any
 
 from dmtrack import __version__
 from dmtrack.errors import DmtrackError, Interrupted
+from dmtrack.io.argtypes import fraction
 
 
 def _add_sequence_args(p: argparse.ArgumentParser) -> None:
@@ -326,18 +327,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fraction(text: str) -> float:
-    """A float, also written as a fraction (``1/3``)."""
-    num, sep, den = text.partition("/")
-    try:
-        value = float(num) / float(den) if sep else float(text)
-    except (ValueError, ZeroDivisionError):
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 < value <= 1:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1], got {text!r}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dmtrack",
@@ -364,7 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override one parameter, e.g. --set tracker.huber_d=2 (repeatable)")
-    p.add_argument("--r-l", type=_fraction, metavar="R",
+    p.add_argument("--r-l", type=fraction, metavar="R",
                    help="RPE length ratio (default 1/20 for KITTI, 1/3 otherwise; the paper uses 1/20 for Tsukuba)")
     p.add_argument("--init", choices=("random", "groundtruth"),
                    help="first keyframe's depth: seeded random (default, the paper) or the dataset's depth image")
@@ -442,7 +431,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--times", metavar="FILE",
                    help="timestamps (times.txt) for KITTI-format files, which have none (default: line index)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--r-l", type=_fraction, default=1.0 / 3.0, metavar="R",
+    p.add_argument("--r-l", type=fraction, default=1.0 / 3.0, metavar="R",
                    help="longest RPE length as a fraction of the path (default 1/3; the paper uses 1/20 for KITTI "
                    "and Tsukuba)")
     p.add_argument("--max-diff", type=float, default=0.01, metavar="S",

@@ -14,6 +14,7 @@ import sys
 from typing import Any
 
 from dmtrack.errors import InputError
+from dmtrack.io.argtypes import non_negative_int, positive_int
 
 __all__ = ["add_bench_parser", "add_report_parser", "cmd_bench", "cmd_report"]
 
@@ -27,26 +28,6 @@ def _r_l(text: str) -> float:
         return parse_r_l(text)
     except InputError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
-    return v
-
-
-def _non_negative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be ≥ 0, got {v}")
-    return v
 
 
 def _usable_cpus() -> int:
@@ -95,13 +76,13 @@ def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="bench folder (created; reused to resume)")
     p.add_argument(
         "--jobs",
-        type=_non_negative_int,
+        type=non_negative_int,
         metavar="N",
         help="runs at a time in worker processes (default: the usable CPUs; 0: serially in this process)",
     )
     p.add_argument(
         "--threads-per-job",
-        type=_positive_int,
+        type=positive_int,
         default=1,
         metavar="T",
         help="numba/OpenCV/BLAS threads per worker (default 1)",
@@ -112,8 +93,8 @@ def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="run on this Dask distributed scheduler instead of local processes (needs dmtrack[cluster];"
         " DIR and the sequences must be on a filesystem shared by the workers)",
     )
-    p.add_argument("--start", type=_non_negative_int, default=0, metavar="N", help="first frame (default 0)")
-    p.add_argument("--max-frames", type=_positive_int, metavar="N", help="process at most N frames per sequence")
+    p.add_argument("--start", type=non_negative_int, default=0, metavar="N", help="first frame (default 0)")
+    p.add_argument("--max-frames", type=positive_int, metavar="N", help="process at most N frames per sequence")
     p.add_argument("--seed", type=int, metavar="S", help="seed of the random depth initialisation (default 0)")
     p.add_argument(
         "--seeds",

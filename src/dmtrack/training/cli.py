@@ -11,6 +11,8 @@ import argparse
 import json
 import sys
 
+from dmtrack.io.argtypes import positive_float, positive_int
+
 
 def cmd_train_feature(args: argparse.Namespace) -> int:
     try:
@@ -51,26 +53,6 @@ def cmd_train_feature(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
-    return value
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {text!r}")
-    return value
-
-
 def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``train-feature`` subcommand to ``subparsers``; returns its parser."""
     p = subparsers.add_parser(
@@ -85,13 +67,13 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
-    p.add_argument("--minutes", type=_positive_float, default=10.0, metavar="M",
+    p.add_argument("--minutes", type=positive_float, default=10.0, metavar="M",
                    help="wall-clock budget of the training loop (default 10)")
-    p.add_argument("--steps", type=_count, metavar="N", help="stop after N steps (whichever comes first)")
-    p.add_argument("--channels", type=_count, default=8, metavar="K", help="output channels K (default 8)")
+    p.add_argument("--steps", type=positive_int, metavar="N", help="stop after N steps (whichever comes first)")
+    p.add_argument("--channels", type=positive_int, default=8, metavar="K", help="output channels K (default 8)")
     p.add_argument("--data", choices=("synthetic", "7scenes", "both"), default="synthetic",
                    help="training data (default synthetic; 7scenes and both are not implemented yet)")
-    p.add_argument("--threads", type=_count, default=1, metavar="N",
+    p.add_argument("--threads", type=positive_int, default=1, metavar="N",
                    help="torch and numba threads (default 1: faster than 2 when other jobs share the cores)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -13,7 +13,9 @@ has loaded. Needs playwright (dmtrack[dev]), Debian's chromium and rerun-sdk (dm
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -42,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
         subprocess.run([sys.executable, "-m", "dmtrack.cli", "report", str(a.run_dir)], check=True)
     rerun = Path(sys.executable).with_name("rerun")
     viewer = subprocess.Popen([str(rerun), str(a.rrd), "--web-viewer", "--web-viewer-port", "9877", "--port", "9878",
-                               "--renderer", "webgl"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                               "--renderer", "webgl"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     try:
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=chromium, args=ARGS)
@@ -55,8 +58,8 @@ def main(argv: list[str] | None = None) -> int:
             page.wait_for_timeout(int(a.wait * 1000))
             page.screenshot(path=str(a.out / "viewer.png"))
             browser.close()
-    finally:
-        viewer.terminate()
+    finally:  # the whole process group: rerun keeps serving (a core busy) if only its launcher is stopped
+        os.killpg(viewer.pid, signal.SIGTERM)
         viewer.wait(timeout=10)
     print(f"written {a.out / 'report.png'} and {a.out / 'viewer.png'}")
     return 0

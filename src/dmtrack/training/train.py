@@ -546,7 +546,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
     scale = match_gain(net, calib, gain)
 
     def meta() -> dict[str, Any]:
-        return {"seed": opts.seed, "data": opts.data, "gain": gain, "options": _jsonable(asdict(opts)),
+        return {"seed": opts.seed, "data": opts.data, "gain": gain, "options": asdict(opts),
                 "preliminary": True}  # fmt: skip
 
     def net_features(img: np.ndarray) -> torch.Tensor:
@@ -632,7 +632,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
     if png is not None:
         files["curve"] = str(png)
     summary = {
-        "options": _jsonable(asdict(opts)),
+        "options": asdict(opts),
         "steps": step,
         "seconds": round(seconds, 1),
         "loop_seconds": round(time.perf_counter() - t_loop, 1),
@@ -648,14 +648,6 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
 def _fmt(v: dict[str, float]) -> str:
     return (f"{v['init_px']:.2f} px -> mean {v['final_px']:.2f} px, median {v['final_px_median']:.2f} px, "
             f"{100 * v['within_1px']:.0f}% within 1 px")  # fmt: skip
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    return x
 
 
 def _write_log(out: Path, rows: list[dict[str, Any]]) -> None:

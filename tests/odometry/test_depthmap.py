@@ -250,6 +250,45 @@ def test_line_stereo_kernel_matches_reference(seeds):
         assert set(np.unique(np.minimum(a[:, 2], 0))) >= {-1.0, 0.0}
 
 
+def test_single_channel_build_is_the_three_dimensional_build_bit_for_bit():
+    """One channel runs a build of its own ((H, W) maps, the multichannel branches pruned at compile time): the
+    line stereo and a whole observe pass give the bytes of the general (H, W, 1) build."""
+    from dmtrack.odometry._depth_common import N_COUNTS
+    from dmtrack.odometry._depth_update import _observe_parallel, observe_numba
+
+    cam = _camera(96, 64)
+    kf, z0 = _frame(0, cam, np.eye(4))
+    T_wc = _motion(4)
+    fr, _ = _frame(4, cam, T_wc)
+    T_fk = np.linalg.inv(T_wc)
+    cfg = DepthConfig()
+
+    def flat(fn):  # line_stereo_numba on (H, W) views of the same maps
+        return lambda kf_, ref, gx, gy, *rest: fn(kf_[..., 0], ref[..., 0], gx[..., 0], gy[..., 0], *rest)
+
+    for ranges in (None, lambda x, y: (0.8 / z0[y, x], 1.0 / z0[y, x], 1.2 / z0[y, x])):
+        a = _stereo_all(kf, fr, T_fk, cfg, 1.0, line_stereo_numba, ranges)
+        b = _stereo_all(kf, fr, T_fk, cfg, 1.0, flat(line_stereo_numba), ranges)
+        assert (a[:, 2] >= 0).sum() > 100
+        assert a.tobytes() == b.tobytes()
+
+    dm = DepthMap()
+    dm.initialize_random(kf, seed=2)
+    dm.valid[np.random.default_rng(0).random(dm.valid.shape) < 0.3] = False  # creations too
+    lv, geo, prm = kf.levels[0], stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, T_fk, 0.2), make_params(cfg)
+    good = np.random.default_rng(1).random((32, 48)) > 0.1
+    two = tuple(x.copy() for x in dm.state)
+    counts2 = observe_numba(two, lv.feat, lv.gx, lv.gy, lv.max_grad, fr.levels[0].feat, good, geo, prm, 1.0, 4, 1.0)
+    three = tuple(x.copy() for x in dm.state)
+    counts3 = np.zeros((64, N_COUNTS), np.int64)
+    _observe_parallel(*three, lv.feat, lv.gx, lv.gy, lv.max_grad, fr.levels[0].feat, good, True, geo, prm, 1.0, 4,
+                      1.0, counts3)  # fmt: skip
+    assert lv.feat.ndim == 3 and counts2[4] > 100  # updated
+    assert counts2.tobytes() == counts3.sum(axis=0).tobytes()
+    for x, y in zip(two, three, strict=True):
+        assert x.tobytes() == y.tobytes()
+
+
 # ================================================================================== random init
 def test_random_init_is_seeded_and_feature_independent():
     cam = _camera(64, 48)
@@ -442,6 +481,60 @@ def test_regularize_kernel_matches_reference(remove_occlusions):
     assert 0.2 * v.size < v.sum() < np.count_nonzero(st[0])  # some dropped, many kept
     np.testing.assert_allclose(a[6][v], b[6][v], rtol=1e-5)
     np.testing.assert_allclose(a[7][v], b[7][v], rtol=1e-5)
+
+
+def _regularize_float32_passes(st, remove_occlusions, validity_th, reg_dist_var):
+    """LSD-SLAM's regularisation as 25 float32 passes, one per offset (dy outer, dx inner), in numpy: the
+    arithmetic and order of additions the kernel must keep, whatever its loop structure."""
+    valid, blacklisted, _nx, validity, idepth, var, idepth_s, var_s = st
+    h, w = valid.shape
+    vr = valid.copy()
+    one, zero, fac = np.float32(1.0), np.float32(0.0), np.float32(1.0)
+    acc = {k: np.zeros((h - 4, w - 4), np.float32) for k in ("v", "s", "i", "occ", "ok")}
+    d0, v0 = idepth[2:-2, 2:-2], var[2:-2, 2:-2]
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            sl = (slice(2 + dy, h - 2 + dy), slice(2 + dx, w - 2 + dx))
+            c = np.float32((dx * dx + dy * dy) * reg_dist_var)
+            di, vi = idepth[sl], var[sl]
+            diff = di - d0
+            incons = fac * diff * diff > vi + v0
+            use = vr[sl] & ~incons
+            with np.errstate(divide="ignore"):
+                iv = one / (vi + c)
+            acc["v"] += np.where(use, validity[sl], zero)
+            acc["s"] += np.where(use, di * iv, zero)
+            acc["i"] += np.where(use, iv, zero)
+            acc["occ"] += np.where(vr[sl] & incons & (di > d0), one, zero)
+            acc["ok"] += np.where(use, one, zero)
+    target = vr[2:-2, 2:-2]
+    drop = target & (acc["v"] < np.float32(validity_th))
+    occl = target & ~drop & (acc["occ"] > acc["ok"]) if remove_occlusions else np.zeros_like(target)
+    keep = target & ~drop & ~occl
+    si = acc["i"].astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = acc["s"].astype(np.float64) / si
+        m = np.where(m < 0, np.minimum(m, -1e-10), np.maximum(m, 1e-10))
+        inv = 1.0 / si
+    inner = (slice(2, h - 2), slice(2, w - 2))
+    idepth_s[inner][keep] = m[keep]
+    var_s[inner][keep] = inv[keep]
+    blacklisted[inner][drop] -= 1
+    valid[inner][drop | occl] = False
+
+
+@pytest.mark.parametrize("remove_occlusions", [False, True])
+def test_regularize_kernel_keeps_the_float32_order_of_the_25_passes(remove_occlusions):
+    """Bit for bit: the kernel's fused passes add in LSD-SLAM's (dy, dx) order, in float32."""
+    for seed in (5, 6):
+        st = _random_state(48, 64, seed, density=0.5, max_validity=10)
+        st[0][20:23, :] = False  # rows without a valid pixel
+        a, b = _copy(st), _copy(st)
+        regularize_numba(a, remove_occlusions, 24.0, 0.075**2)
+        _regularize_float32_passes(b, remove_occlusions, 24.0, 0.075**2)
+        assert (a[0] != st[0]).any() and (a[6] != st[6]).any()
+        for x, y in zip(a, b, strict=True):
+            assert x.tobytes() == y.tobytes()
 
 
 @pytest.mark.parametrize("remove_occlusions", [False, True])

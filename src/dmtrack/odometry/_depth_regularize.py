@@ -44,10 +44,12 @@ def _regularize_impl(
     validity_th,
     reg_dist_var,
 ):  # pragma: no cover - compiled
-    """Row-vectorised regularisation: for each row, 25 branch-free passes (one per neighbour offset)
-    accumulate into per-column float32 buffers; then the per-pixel decisions. Rows only read ``valid_read``
-    (a copy of ``valid``), ``idepth``, ``var`` and ``validity``, which are not written, so rows are independent
-    (interleaved row chunks, ``prange`` in the parallel build)."""
+    """Row-vectorised regularisation: for each row, five branch-free passes over the columns (one per neighbour
+    row dy, its five column offsets dx unrolled) accumulate into per-column float32 buffers, in the order
+    (dy, dx) of LSD-SLAM's loops (a pixel's sums are those of 25 passes, one per offset, with a fifth of their
+    buffer traffic); then the per-pixel decisions. A row without valid pixels is skipped (it produces nothing).
+    Rows only read ``valid_read`` (a copy of ``valid``), ``idepth``, ``var`` and ``validity``, which are not
+    written, so rows are independent (interleaved row chunks, ``prange`` in the parallel build)."""
     h, w = valid.shape
     for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
         for x in range(w):
@@ -63,6 +65,11 @@ def _regularize_impl(
         n_occ = np.empty(w, np.float32)
         n_ok = np.empty(w, np.float32)
         for y in range(2 + chunk, h - 2, ROW_CHUNKS):
+            x0 = 2
+            while x0 < w - 2 and not valid_read[y, x0]:
+                x0 += 1
+            if x0 == w - 2:
+                continue  # no valid pixel in this row: nothing to do
             for x in range(w):
                 acc_s[x] = zero
                 acc_i[x] = zero
@@ -70,23 +77,93 @@ def _regularize_impl(
                 n_occ[x] = zero
                 n_ok[x] = zero
             for dy in range(-2, 3):
-                for dx in range(-2, 3):
-                    c = np.float32((dx * dx + dy * dy) * reg_dist_var)
-                    for x in range(2, w - 2):
-                        vr = valid_read[y + dy, x + dx]
-                        di = idepth[y + dy, x + dx]
-                        vi = var[y + dy, x + dx]
-                        d0 = idepth[y, x]
-                        diff = di - d0
-                        incons = fac * diff * diff > vi + var[y, x]
-                        use = vr and not incons
-                        iv = one / (vi + c)
-                        acc_v[x] += validity[y + dy, x + dx] if use else zero
-                        acc_s[x] += di * iv if use else zero
-                        acc_i[x] += iv if use else zero
-                        n_occ[x] += one if (vr and incons and di > d0) else zero
-                        n_ok[x] += one if use else zero
-            for x in range(2, w - 2):
+                yy = y + dy
+                dy2 = dy * dy
+                # the offsets dx = −2 … 2 of this row, each with its distance term
+                c0 = np.float32((4 + dy2) * reg_dist_var)
+                c1 = np.float32((1 + dy2) * reg_dist_var)
+                c2 = np.float32((0 + dy2) * reg_dist_var)
+                c3 = np.float32((1 + dy2) * reg_dist_var)
+                c4 = np.float32((4 + dy2) * reg_dist_var)
+                for x in range(2, w - 2):  # (bounds LLVM can see: the loop is vectorised)
+                    d0 = idepth[y, x]
+                    v0 = var[y, x]
+                    sv = acc_v[x]
+                    ss = acc_s[x]
+                    si = acc_i[x]
+                    so = n_occ[x]
+                    sk = n_ok[x]
+                    # dx = -2
+                    vr = valid_read[yy, x - 2]
+                    di = idepth[yy, x - 2]
+                    vi = var[yy, x - 2]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + v0
+                    use = vr & (not incons)
+                    iv = one / (vi + c0)
+                    sv += validity[yy, x - 2] if use else zero
+                    ss += di * iv if use else zero
+                    si += iv if use else zero
+                    so += one if (vr & incons & (di > d0)) else zero
+                    sk += one if use else zero
+                    # dx = -1
+                    vr = valid_read[yy, x - 1]
+                    di = idepth[yy, x - 1]
+                    vi = var[yy, x - 1]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + v0
+                    use = vr & (not incons)
+                    iv = one / (vi + c1)
+                    sv += validity[yy, x - 1] if use else zero
+                    ss += di * iv if use else zero
+                    si += iv if use else zero
+                    so += one if (vr & incons & (di > d0)) else zero
+                    sk += one if use else zero
+                    # dx = 0
+                    vr = valid_read[yy, x]
+                    di = idepth[yy, x]
+                    vi = var[yy, x]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + v0
+                    use = vr & (not incons)
+                    iv = one / (vi + c2)
+                    sv += validity[yy, x] if use else zero
+                    ss += di * iv if use else zero
+                    si += iv if use else zero
+                    so += one if (vr & incons & (di > d0)) else zero
+                    sk += one if use else zero
+                    # dx = 1
+                    vr = valid_read[yy, x + 1]
+                    di = idepth[yy, x + 1]
+                    vi = var[yy, x + 1]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + v0
+                    use = vr & (not incons)
+                    iv = one / (vi + c3)
+                    sv += validity[yy, x + 1] if use else zero
+                    ss += di * iv if use else zero
+                    si += iv if use else zero
+                    so += one if (vr & incons & (di > d0)) else zero
+                    sk += one if use else zero
+                    # dx = 2
+                    vr = valid_read[yy, x + 2]
+                    di = idepth[yy, x + 2]
+                    vi = var[yy, x + 2]
+                    diff = di - d0
+                    incons = fac * diff * diff > vi + v0
+                    use = vr & (not incons)
+                    iv = one / (vi + c4)
+                    sv += validity[yy, x + 2] if use else zero
+                    ss += di * iv if use else zero
+                    si += iv if use else zero
+                    so += one if (vr & incons & (di > d0)) else zero
+                    sk += one if use else zero
+                    acc_v[x] = sv
+                    acc_s[x] = ss
+                    acc_i[x] = si
+                    n_occ[x] = so
+                    n_ok[x] = sk
+            for x in range(x0, w - 2):
                 if not valid_read[y, x]:
                     continue
                 if acc_v[x] < validity_th:

@@ -61,6 +61,173 @@ DIFF_FAC_OBSERVE = 1.0
 
 
 # ============================================================================== numba kernel
+@numba.njit(**_JIT)
+def _observe_rows(
+    chunk,
+    valid,
+    blacklisted,
+    next_id,
+    validity,
+    idepth,
+    var,
+    idepth_s,
+    var_s,
+    kf,
+    kf_gx,
+    kf_gy,
+    kf_mg,
+    ref,
+    good,
+    use_good,
+    geo,
+    prm,
+    cscale,
+    frame_id,
+    skip_ratio,
+    counts,
+):  # pragma: no cover - compiled
+    """observeDepth of the rows 3 + ``chunk``, 3 + ``chunk`` + ROW_CHUNKS, … (in place; counters per row).
+
+    A function of its own, called from the ``prange`` of :func:`_observe_impl`, rather than that loop's body:
+    numba's parallel passes then see a one-line loop (they took two thirds of a 36 s compile when the body held the
+    inlined line stereo), and ``kf.ndim`` is a constant here, so the single-channel build — (H, W) maps, see
+    :func:`observe_numba` — is compiled without the multichannel code. The line stereo is inlined by LLVM
+    (``_JIT_LLVM_INLINE``).
+    """
+    h, w = valid.shape
+    if kf.ndim == 2:  # one channel as (H, W) (see _line_stereo)
+        nch = 1
+    else:
+        nch = kf.shape[2]
+    min_grad = prm[P_MIN_GRAD]
+    max_var = prm[P_MAX_VAR]
+    max_depth_id = 1.0 / prm[P_MIN_DEPTH]
+    kfv = np.empty((5, nch), np.float64)
+    ring = np.empty((6, nch), np.float64)
+    st = np.empty((6, 7), np.float64)
+    for y in range(3 + chunk, h - 3, ROW_CHUNKS):
+        for x in range(3, w - 3):
+            has = valid[y, x]
+            mg = kf_mg[y, x]
+            if has and mg < min_grad:
+                valid[y, x] = False
+                counts[y, C_INVALIDATED_GRAD] += 1
+                continue
+            if mg < min_grad or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
+                continue
+            if has:
+                # single reference frame per update: skip if scheduled for a later frame
+                if next_id[y, x] > frame_id:
+                    counts[y, C_SKIP_SCHEDULED] += 1
+                    continue
+            if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
+                counts[y, C_SKIP_NOT_GOOD] += 1
+                continue
+            ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
+            if not ok:
+                counts[y, C_SKIP_EPL] += 1
+                continue
+            if not has:
+                # ---------------- create
+                counts[y, C_CREATE_ATTEMPTED] += 1
+                err, rid, rvar, rlen = _line_stereo(
+                    kf,
+                    ref,
+                    kf_gx,
+                    kf_gy,
+                    float(x),
+                    float(y),
+                    epxn,
+                    epyn,
+                    0.0,
+                    1.0,
+                    max_depth_id,
+                    geo,
+                    prm,
+                    cscale,
+                    kfv,
+                    ring,
+                    st,
+                )
+                if err == -3.0 or err == -2.0:
+                    blacklisted[y, x] -= 1
+                    counts[y, C_BLACKLISTED] += 1
+                if err < 0 or rvar > max_var:
+                    continue
+                valid[y, x] = True
+                blacklisted[y, x] = 0
+                next_id[y, x] = 0
+                validity[y, x] = prm[P_VAL_INIT_OBS]
+                idepth[y, x] = _unzero(rid)
+                var[y, x] = rvar
+                idepth_s[y, x] = -1.0
+                var_s[y, x] = -1.0
+                counts[y, C_CREATED] += 1
+            else:
+                # ---------------- update
+                # variance bounding the search interval (±2σ around the smoothed idepth) and the consistency
+                # test: LSD-SLAM uses the regularised one; "raw-search" / "raw" take the pixel's own variance
+                # where it is larger (see DepthConfig.update_variance)
+                var_search = np.float64(var_s[y, x])
+                var_test = var_search
+                if prm[P_UPDATE_VAR] != 0.0 and var[y, x] > var_search:
+                    var_search = np.float64(var[y, x])
+                    if prm[P_UPDATE_VAR] == 2.0:
+                        var_test = var_search
+                sv = math.sqrt(var_search)
+                ids = np.float64(idepth_s[y, x])
+                lo = ids - sv * prm[P_EPL_VAR_FAC]
+                hi = ids + sv * prm[P_EPL_VAR_FAC]
+                if lo < 0:
+                    lo = 0.0
+                if hi > max_depth_id:
+                    hi = max_depth_id
+                counts[y, C_UPDATE_ATTEMPTED] += 1
+                err, rid, rvar, rlen = _line_stereo(
+                    kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, kfv, ring, st
+                )
+                diff = rid - ids
+                if err == -1.0:
+                    counts[y, C_OOB] += 1
+                elif err == -2.0:
+                    counts[y, C_FAIL] += 1
+                    vc = validity[y, x] - prm[P_VAL_DEC]
+                    validity[y, x] = vc if vc > 0 else 0.0
+                    next_id[y, x] = 0
+                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                    var[y, x] = nv
+                    if nv > max_var:
+                        valid[y, x] = False
+                        blacklisted[y, x] -= 1
+                elif err == -3.0 or err == -4.0:
+                    counts[y, C_NOT_FOUND] += 1
+                elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_test:
+                    counts[y, C_INCONSISTENT] += 1
+                    nv = var[y, x] * prm[P_FAIL_VAR_INC]
+                    var[y, x] = nv
+                    if nv > max_var:
+                        valid[y, x] = False
+                else:
+                    counts[y, C_UPDATED] += 1
+                    id_var = var[y, x] * prm[P_SUCC_VAR_INC]
+                    wgt = rvar / (rvar + id_var)
+                    idepth[y, x] = _unzero((1.0 - wgt) * rid + wgt * idepth[y, x])
+                    id_var = id_var * wgt
+                    if id_var < var[y, x]:
+                        var[y, x] = id_var
+                    vmax = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
+                    vc = validity[y, x] + prm[P_VAL_INC]
+                    validity[y, x] = vmax if vc > vmax else vc
+                    if rlen < prm[P_MIN_EPL_CROP]:
+                        inc = skip_ratio
+                        if inc < 3.0:
+                            inc = 3.0
+                        inc += int(rlen * 10000.0) % 2
+                        if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
+                            inc *= 3.0
+                        next_id[y, x] = int(frame_id + inc)
+
+
 def _observe_impl(
     valid,
     blacklisted,
@@ -84,136 +251,14 @@ def _observe_impl(
     skip_ratio,
     counts,
 ):  # pragma: no cover - compiled
-    h, w = valid.shape
-    nch = kf.shape[2]
-    min_grad = prm[P_MIN_GRAD]
-    max_var = prm[P_MAX_VAR]
-    max_depth_id = 1.0 / prm[P_MIN_DEPTH]
     # rows are independent; chunk c takes rows 3 + c, 3 + c + ROW_CHUNKS, … (interleaved, so that the
-    # static schedule of prange gives every thread a similar share of the textured rows)
+    # schedule of prange gives every thread a similar share of the textured rows). The prange index is unsigned
+    # inside the parallel build: int64 keeps one compiled signature of _observe_rows (and its arithmetic signed).
     for chunk in prange(ROW_CHUNKS):
-        buf = np.empty((2, 6, nch), np.float64)
-        st = np.empty((6, 7), np.float64)
-        for y in range(3 + chunk, h - 3, ROW_CHUNKS):
-            for x in range(3, w - 3):
-                has = valid[y, x]
-                mg = kf_mg[y, x]
-                if has and mg < min_grad:
-                    valid[y, x] = False
-                    counts[y, C_INVALIDATED_GRAD] += 1
-                    continue
-                if mg < min_grad or blacklisted[y, x] < prm[P_MIN_BLACKLIST]:
-                    continue
-                if has:
-                    # single reference frame per update: skip if scheduled for a later frame
-                    if next_id[y, x] > frame_id:
-                        counts[y, C_SKIP_SCHEDULED] += 1
-                        continue
-                if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
-                    counts[y, C_SKIP_NOT_GOOD] += 1
-                    continue
-                ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
-                if not ok:
-                    counts[y, C_SKIP_EPL] += 1
-                    continue
-                if not has:
-                    # ---------------- create
-                    counts[y, C_CREATE_ATTEMPTED] += 1
-                    err, rid, rvar, rlen = _line_stereo(
-                        kf,
-                        ref,
-                        kf_gx,
-                        kf_gy,
-                        float(x),
-                        float(y),
-                        epxn,
-                        epyn,
-                        0.0,
-                        1.0,
-                        max_depth_id,
-                        geo,
-                        prm,
-                        cscale,
-                        buf,
-                        st,
-                    )
-                    if err == -3.0 or err == -2.0:
-                        blacklisted[y, x] -= 1
-                        counts[y, C_BLACKLISTED] += 1
-                    if err < 0 or rvar > max_var:
-                        continue
-                    valid[y, x] = True
-                    blacklisted[y, x] = 0
-                    next_id[y, x] = 0
-                    validity[y, x] = prm[P_VAL_INIT_OBS]
-                    idepth[y, x] = _unzero(rid)
-                    var[y, x] = rvar
-                    idepth_s[y, x] = -1.0
-                    var_s[y, x] = -1.0
-                    counts[y, C_CREATED] += 1
-                else:
-                    # ---------------- update
-                    # variance bounding the search interval (±2σ around the smoothed idepth) and the consistency
-                    # test: LSD-SLAM uses the regularised one; "raw-search" / "raw" take the pixel's own variance
-                    # where it is larger (see DepthConfig.update_variance)
-                    var_search = np.float64(var_s[y, x])
-                    var_test = var_search
-                    if prm[P_UPDATE_VAR] != 0.0 and var[y, x] > var_search:
-                        var_search = np.float64(var[y, x])
-                        if prm[P_UPDATE_VAR] == 2.0:
-                            var_test = var_search
-                    sv = math.sqrt(var_search)
-                    ids = np.float64(idepth_s[y, x])
-                    lo = ids - sv * prm[P_EPL_VAR_FAC]
-                    hi = ids + sv * prm[P_EPL_VAR_FAC]
-                    if lo < 0:
-                        lo = 0.0
-                    if hi > max_depth_id:
-                        hi = max_depth_id
-                    counts[y, C_UPDATE_ATTEMPTED] += 1
-                    err, rid, rvar, rlen = _line_stereo(
-                        kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, buf, st
-                    )
-                    diff = rid - ids
-                    if err == -1.0:
-                        counts[y, C_OOB] += 1
-                    elif err == -2.0:
-                        counts[y, C_FAIL] += 1
-                        vc = validity[y, x] - prm[P_VAL_DEC]
-                        validity[y, x] = vc if vc > 0 else 0.0
-                        next_id[y, x] = 0
-                        nv = var[y, x] * prm[P_FAIL_VAR_INC]
-                        var[y, x] = nv
-                        if nv > max_var:
-                            valid[y, x] = False
-                            blacklisted[y, x] -= 1
-                    elif err == -3.0 or err == -4.0:
-                        counts[y, C_NOT_FOUND] += 1
-                    elif DIFF_FAC_OBSERVE * diff * diff > rvar + var_test:
-                        counts[y, C_INCONSISTENT] += 1
-                        nv = var[y, x] * prm[P_FAIL_VAR_INC]
-                        var[y, x] = nv
-                        if nv > max_var:
-                            valid[y, x] = False
-                    else:
-                        counts[y, C_UPDATED] += 1
-                        id_var = var[y, x] * prm[P_SUCC_VAR_INC]
-                        wgt = rvar / (rvar + id_var)
-                        idepth[y, x] = _unzero((1.0 - wgt) * rid + wgt * idepth[y, x])
-                        id_var = id_var * wgt
-                        if id_var < var[y, x]:
-                            var[y, x] = id_var
-                        vmax = float(int(prm[P_VAL_MAX] + mg * prm[P_VAL_MAX_VAR] / 255.0))
-                        vc = validity[y, x] + prm[P_VAL_INC]
-                        validity[y, x] = vmax if vc > vmax else vc
-                        if rlen < prm[P_MIN_EPL_CROP]:
-                            inc = skip_ratio
-                            if inc < 3.0:
-                                inc = 3.0
-                            inc += int(rlen * 10000.0) % 2
-                            if rlen < 0.5 * prm[P_MIN_EPL_CROP]:
-                                inc *= 3.0
-                            next_id[y, x] = int(frame_id + inc)
+        _observe_rows(
+            np.int64(chunk), valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, kf, kf_gx, kf_gy,
+            kf_mg, ref, good, use_good, geo, prm, cscale, frame_id, skip_ratio, counts,
+        )  # fmt: skip
 
 
 _observe_parallel = numba.njit(parallel=True, **_JIT)(_variant(_observe_impl, "_parallel"))
@@ -240,6 +285,8 @@ def observe_numba(
     so ``parallel=True`` (numba prange over rows) gives byte-identical results.
     """
     h = state[0].shape[0]
+    if kf.shape[2] == 1:  # one channel: the (H, W) build, without channel loops (the same arithmetic)
+        kf, kf_gx, kf_gy, ref = (a.reshape(a.shape[0], a.shape[1]) for a in (kf, kf_gx, kf_gy, ref))
     counts = np.zeros((h, N_COUNTS), np.int64)
     use_good = good is not None
     g = good if use_good else np.ones((1, 1), np.bool_)

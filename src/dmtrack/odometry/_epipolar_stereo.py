@@ -19,7 +19,7 @@ import numpy as np
 from dmtrack.odometry._depth_common import (
     _JIT,
     _JIT_FAST,
-    _JIT_INLINE,
+    _JIT_LLVM_INLINE,
     G_CX,
     G_CXI,
     G_CY,
@@ -48,6 +48,7 @@ from dmtrack.odometry._depth_common import (
     P_SUBPIXEL,
     _bilinear,
     _sample,
+    _sample1,
     bilinear_reference,
 )
 from dmtrack.odometry._fastmath import pin_cached
@@ -64,9 +65,9 @@ DIVISION_EPS = 1e-10
 def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
     """(Σ_c ((2 gx_c, 2 gy_c)·ep)², Σ_c |2 ∇F_c|²) of one keyframe pixel (N > 1), in channel order.
 
-    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the ``prange`` body of the observe
-    kernel, where a re-associated sum would round differently in the run that compiles the kernel and in the runs
-    that load it from numba's cache (see :mod:`dmtrack.odometry._fastmath`).
+    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the observe kernel, where a
+    re-associated sum would round differently in the run that compiles the kernel and in the runs that load it from
+    numba's cache (see :mod:`dmtrack.odometry._fastmath`).
     """
     dot2 = 0.0
     g2 = 0.0
@@ -149,7 +150,7 @@ def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - co
 pin_cached(_window_cost, _kf_norms, _sample_stats)
 
 
-@numba.njit(**_JIT_INLINE)
+@numba.njit(**_JIT_LLVM_INLINE)
 def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - compiled
     """``makeAndCheckEPL``: returns (ok, epxn, epyn) with the unit epipolar direction in the keyframe."""
     epx = -geo[G_FX] * geo[G_TINV] + geo[G_TINV + 2] * (x - geo[G_CX])
@@ -159,7 +160,13 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
     len2 = epx * epx + epy * epy
     if len2 < prm[P_MIN_EPL_LEN2]:
         return False, 0.0, 0.0
-    if kf_gx.shape[2] == 1:
+    if kf_gx.ndim == 2:  # single channel as (H, W): the build for it has no channel loops
+        gx = 2.0 * kf_gx[y, x]
+        gy = 2.0 * kf_gy[y, x]
+        d = gx * epx + gy * epy
+        dot2 = d * d
+        g2 = gx * gx + gy * gy
+    elif kf_gx.shape[2] == 1:
         gx = 2.0 * kf_gx[y, x, 0]
         gy = 2.0 * kf_gy[y, x, 0]
         d = gx * epx + gy * epy
@@ -176,22 +183,28 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
     return True, epx * fac, epy * fac
 
 
-@numba.njit(**_JIT_INLINE)
+@numba.njit(**_JIT_LLVM_INLINE)
 def _line_stereo(
-    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf, st
+    kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, kfv, ring, st
 ):  # pragma: no cover - compiled
     """LSD-SLAM ``doLineStereo`` for N channels.
 
-    ``buf`` is a (2, 6, N) float64 scratch array (keyframe samples, reference ring), ``st`` a (6, 7) float64
-    one (per-sample statistics, N > 1). Returns (err, idepth, var, epl_length): err ≥ 0 is the
-    matching cost on success; −1 out of bounds, −2 ambiguous / failed, −3 error too large, −4 arithmetic.
+    ``kf``, ``ref``, ``kf_gx``, ``kf_gy`` are (H, W, N) float32 maps, or (H, W) for one channel: numba compiles a
+    build per dimensionality and prunes the other's branches (``ndim`` is a compile-time constant), so the
+    single-channel build keeps every sample in a register. ``kfv`` (5, N) and ``ring`` (6, N) are float64 scratch
+    arrays (keyframe samples, reference ring; unused by the (H, W) build), ``st`` a (6, 7) float64 one
+    (per-sample statistics, N > 1). Returns (err, idepth, var, epl_length): err ≥ 0 is the matching cost on
+    success; −1 out of bounds, −2 ambiguous / failed, −3 error too large, −4 arithmetic.
     """
     h = kf.shape[0]
     w = kf.shape[1]
-    nch = kf.shape[2]
+    if kf.ndim == 2:
+        nch = 1
+    else:
+        nch = kf.shape[2]
     nan = np.nan
-    kfv = buf[0]  # keyframe samples, rows: p2, p1, 0, m1, m2 (rows 0..4)
-    ring = buf[1]  # reference-frame samples around the current search position (6 rows, see below)
+    # kfv: keyframe samples, rows p2, p1, 0, m1, m2 (rows 0..4); ring: reference-frame samples around the current
+    # search position (6 rows, see below)
 
     kx = geo[G_FXI] * u + geo[G_CXI]
     ky = geo[G_FYI] * v + geo[G_CYI]
@@ -223,9 +236,16 @@ def _line_stereo(
     if not (rescale > 0.7 and rescale < 1.4):
         return -1.0, nan, nan, nan
 
-    for k in range(5):
-        s = float(2 - k)  # p2, p1, 0, m1, m2
-        _sample(kf, u + s * epxn * rescale, v + s * epyn * rescale, kfv, k)
+    if kf.ndim == 2:  # the offsets s = 2, 1, 0, −1, −2 of the loop below, in the same arithmetic
+        k0 = _sample1(kf, u + 2.0 * epxn * rescale, v + 2.0 * epyn * rescale)
+        k1 = _sample1(kf, u + 1.0 * epxn * rescale, v + 1.0 * epyn * rescale)
+        k2 = _sample1(kf, u + 0.0 * epxn * rescale, v + 0.0 * epyn * rescale)
+        k3 = _sample1(kf, u + -1.0 * epxn * rescale, v + -1.0 * epyn * rescale)
+        k4 = _sample1(kf, u + -2.0 * epxn * rescale, v + -2.0 * epyn * rescale)
+    else:
+        for k in range(5):
+            s = float(2 - k)  # p2, p1, 0, m1, m2
+            _sample(kf, u + s * epxn * rescale, v + s * epyn * rescale, kfv, k)
 
     # near point (max idepth) and far point (min idepth) in the reference frame
     pc0 = pinf0 + kt0 * max_idepth
@@ -296,27 +316,34 @@ def _line_stereo(
     win = ring
     grey = nch == 1
     dots = nch >= DOT_MIN_CHANNELS
-    if not dots:
-        for j in range(1, 5):
-            off = float(2 - j)
-            _sample(ref, cpx + off * incx, cpy + off * incy, win, j if grey else 6 - j)
+    # grey fast path: window, keyframe samples and previous residuals in scalars (registers)
+    v0 = 0.0
+    if kf.ndim == 2:  # offsets 1, 0, −1, −2 as in the loop below
+        v1 = _sample1(ref, cpx + 1.0 * incx, cpy + 1.0 * incy)
+        v2 = _sample1(ref, cpx + 0.0 * incx, cpy + 0.0 * incy)
+        v3 = _sample1(ref, cpx + -1.0 * incx, cpy + -1.0 * incy)
+        v4 = _sample1(ref, cpx + -2.0 * incx, cpy + -2.0 * incy)
         kk0 = kk1 = kk2 = kk3 = kk4 = 0.0
     else:
-        kk0, kk1, kk2, kk3, kk4 = _kf_norms(kfv)
-        for j in range(4, 0, -1):
-            off = float(2 - j)
-            _sample_stats(ref, cpx + off * incx, cpy + off * incy, win, 6 - j, 5 - j, kfv, st)
-    # grey fast path: window, keyframe samples and previous residuals in scalars (registers)
-    k0 = kfv[0, 0]
-    k1 = kfv[1, 0]
-    k2 = kfv[2, 0]
-    k3 = kfv[3, 0]
-    k4 = kfv[4, 0]
-    v0 = 0.0
-    v1 = win[1, 0]
-    v2 = win[2, 0]
-    v3 = win[3, 0]
-    v4 = win[4, 0]
+        if not dots:
+            for j in range(1, 5):
+                off = float(2 - j)
+                _sample(ref, cpx + off * incx, cpy + off * incy, win, j if grey else 6 - j)
+            kk0 = kk1 = kk2 = kk3 = kk4 = 0.0
+        else:
+            kk0, kk1, kk2, kk3, kk4 = _kf_norms(kfv)
+            for j in range(4, 0, -1):
+                off = float(2 - j)
+                _sample_stats(ref, cpx + off * incx, cpy + off * incy, win, 6 - j, 5 - j, kfv, st)
+        k0 = kfv[0, 0]
+        k1 = kfv[1, 0]
+        k2 = kfv[2, 0]
+        k3 = kfv[3, 0]
+        k4 = kfv[4, 0]
+        v1 = win[1, 0]
+        v2 = win[2, 0]
+        v3 = win[3, 0]
+        v4 = win[4, 0]
     q0 = q1 = q2 = q3 = q4 = 0.0
 
     loop = 0
@@ -339,8 +366,11 @@ def _line_stereo(
                 v3 = v2
                 v2 = v1
                 v1 = v0
-            _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, 0)
-            v0 = win[0, 0]
+            if kf.ndim == 2:
+                v0 = _sample1(ref, cpx + 2.0 * incx, cpy + 2.0 * incy)
+            else:
+                _sample(ref, cpx + 2.0 * incx, cpy + 2.0 * incy, win, 0)
+                v0 = win[0, 0]
             e0 = v0 - k0
             e1 = v1 - k1
             e2 = v2 - k2
@@ -438,10 +468,20 @@ def _line_stereo(
 
     sample_dist = GRADIENT_SAMPLE_DIST * rescale
     gal = 0.0
-    for k in range(4):
-        for c in range(nch):
-            t = kfv[k, c] - kfv[k + 1, c]
-            gal += t * t
+    if kf.ndim == 2:  # the loop below for one channel
+        t = k0 - k1
+        gal += t * t
+        t = k1 - k2
+        gal += t * t
+        t = k2 - k3
+        gal += t * t
+        t = k3 - k4
+        gal += t * t
+    else:
+        for k in range(4):
+            for c in range(nch):
+                t = kfv[k, c] - kfv[k + 1, c]
+                gal += t * t
     gal = cscale * gal / (sample_dist * sample_dist)
     if best_err > prm[P_MAX_ERR] + math.sqrt(gal) * 20.0:
         return -3.0, nan, nan, nan
@@ -472,12 +512,19 @@ def _line_stereo(
     iv = int(v)
     gg = 0.0
     ge = 0.0
-    for c in range(nch):
-        gxc = kf_gx[iv, iu, c]
-        gyc = kf_gy[iv, iu, c]
+    if kf.ndim == 2:  # the loop below for one channel (float32 squares, as there)
+        gxc = kf_gx[iv, iu]
+        gyc = kf_gy[iv, iu]
         gg += gxc * gxc + gyc * gyc
         d = gxc * epxn + gyc * epyn
         ge += d * d
+    else:
+        for c in range(nch):
+            gxc = kf_gx[iv, iu, c]
+            gyc = kf_gy[iv, iu, c]
+            gg += gxc * gxc + gyc * gyc
+            d = gxc * epxn + gyc * epyn
+            ge += d * d
     geo_err = tau * tau * (cscale * gg) / (cscale * ge + DIVISION_EPS)
     disc = 0.05 if did_subpixel else 0.5
     var = alpha * alpha * (disc * sample_dist * sample_dist + geo_err + photo)
@@ -489,10 +536,15 @@ def line_stereo_numba(
     kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale
 ):  # pragma: no cover - compiled
     """Single-pixel line stereo (allocates its own scratch). See :func:`line_stereo_reference`."""
-    buf = np.empty((2, 6, kf.shape[2]), np.float64)
+    if kf.ndim == 2:
+        nch = 1
+    else:
+        nch = kf.shape[2]
+    kfv = np.empty((5, nch), np.float64)
+    ring = np.empty((6, nch), np.float64)
     st = np.empty((6, 7), np.float64)
     return _line_stereo(
-        kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, buf, st
+        kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, kfv, ring, st
     )
 
 

@@ -61,6 +61,18 @@ def test_downsample_numba_equals_numpy_and_box_mean(n: int) -> None:
     np.testing.assert_allclose(a, box, rtol=0, atol=1e-4)
 
 
+@pytest.mark.parametrize("h,w", [(1, 1), (2, 2), (2, 5), (3, 3), (5, 2), (7, 9), (33, 17)])
+def test_grey_kernels_equal_numpy_on_small_and_odd_sizes(h: int, w: int) -> None:
+    """Grey (N = 1) has its own vectorised kernels: the same bits as the references, borders included."""
+    f = _random_feat(h, w, 1, seed=h * 100 + w)
+    np.testing.assert_array_equal(pack(f), pack_numpy(f))
+    for a, b in zip(gradients(f), gradients_numpy(f), strict=True):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    if h % 2 == 0 and w % 2 == 0:
+        d = downsample(f)
+        assert d.tobytes() == downsample_numpy(f).tobytes() and d.shape == (h // 2, w // 2, 1)
+
+
 def test_gradient_definition_against_explicit_formula() -> None:
     f = _random_feat(20, 30, 3, seed=3)
     gx, gy, mg = gradients_numpy(f)

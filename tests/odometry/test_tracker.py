@@ -22,7 +22,15 @@ from dmtrack.odometry._tracker_normal_equations import (
     warp_update_parallel,
 )
 from dmtrack.odometry._tracker_points import idepth_downsample, idepth_downsample_numpy, make_points, make_points_numpy
-from dmtrack.odometry._tracker_residuals import BUF_COLS, eval_params, eval_pass, eval_pass_numpy, eval_pass_parallel
+from dmtrack.odometry._tracker_residuals import (
+    BUF_COLS,
+    _eval_grey,
+    _eval_grey_parallel,
+    eval_params,
+    eval_pass,
+    eval_pass_numpy,
+    eval_pass_parallel,
+)
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.odometry.frame import Frame, build_frame
 from dmtrack.odometry.tracker import Tracker, TrackingReference
@@ -217,6 +225,81 @@ def test_eval_pass_numba_equals_numpy(copies: int, affine_sums: bool) -> None:
     An, bn = warp_update_numpy(args2[-1])
     np.testing.assert_allclose(A, An, rtol=rtol, atol=rtol * np.abs(An).max() if fast else 0)
     np.testing.assert_allclose(b, bn, rtol=rtol, atol=rtol * np.abs(bn).max())
+
+
+@pytest.mark.parametrize("affine_sums", [False, True])
+def test_grey_kernel_is_bit_identical_to_the_point_by_point_kernel(affine_sums: bool) -> None:
+    """The vectorised grey kernel does the general kernel's per-point arithmetic (whose N = 1 branch is the
+    original point-by-point loop): the same bytes for the sums, the flags and the buffer, at every level, with
+    points outside the image and behind the camera, serial and threaded."""
+    pair = Pair()
+    poses = [
+        SE3.exp(0.5 * MOTION).matrix() @ np.linalg.inv(SE3.exp(np.r_[0.3, 0, 0, 0, 0, 0]).matrix()),
+        SE3.exp(np.r_[0.0, 0.0, 0.0, 0.0, np.pi - 0.01, 0.0]).matrix(),  # turned around: points behind the camera
+    ]
+    for T in poses:
+        for lvl in (1, 2, 3, 4):
+            args, rl, _ = _eval_args(pair, lvl, T, 1, affine_sums)
+            want_args = [x.copy() if isinstance(x, np.ndarray) else x for x in args]
+            want = eval_pass_parallel(*want_args)
+            assert 0 < want[0] <= rl.n_points
+            for fn in (_eval_grey, _eval_grey_parallel):
+                got_args = [x.copy() if isinstance(x, np.ndarray) else x for x in args]
+                got_args[-1][:] = np.nan  # every row must be written
+                assert fn(*got_args) == want
+                assert got_args[-3].tobytes() == want_args[-3].tobytes()  # flags
+                assert got_args[-1].tobytes() == want_args[-1].tobytes()  # buffer
+        if T is poses[1]:  # points behind the camera project into the image (the kernel does not test z' > 0)
+            assert (want_args[-1][:, 2] < 0).any()
+        else:
+            assert want[0] < rl.n_points and not want_args[-3].all()
+
+
+def _warp_update_point_by_point(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The normal equations as the original kernel formed them: per block of 1024 rows, skip z' = 0, add each
+    point's terms to 27 sums in row order (Python floats are IEEE doubles: the same roundings)."""
+    tot = [0.0] * 27
+    for i0 in range(0, len(buf), 1024):
+        s = [0.0] * 27
+        for x, y, z, sxx, sxy, syy, bx, by in buf[i0 : i0 + 1024].tolist():
+            if z == 0.0:
+                continue
+            iz = 1.0 / z
+            xz, yz = x * iz, y * iz
+            jx = (iz, 0.0, -xz * iz, -xz * yz, 1.0 + xz * xz, -yz)
+            jy = (0.0, iz, -yz * iz, -(1.0 + yz * yz), xz * yz, xz)
+            u = [sxx * jx[0], sxy * jy[1]] + [sxx * jx[k] + sxy * jy[k] for k in range(2, 6)]
+            q = [0.0, syy * jy[1]] + [sxy * jx[k] + syy * jy[k] for k in range(2, 6)]
+            k = 0
+            for i in range(6):
+                for j in range(i, 6):
+                    # rows 0 and 1 of M have a single non-zero entry in columns 0 and 1
+                    s[k] += jx[0] * u[j] if i == 0 else jy[1] * q[j] if i == 1 else jx[i] * u[j] + jy[i] * q[j]
+                    k += 1
+            for i, t in enumerate((jx[0] * bx, jy[1] * by)):
+                s[21 + i] += t
+            for i in range(2, 6):
+                s[21 + i] += jx[i] * bx + jy[i] * by
+        tot = [a + b for a, b in zip(tot, s, strict=True)]
+    A = np.empty((6, 6))
+    A[np.triu_indices(6)] = tot[:21]
+    A.T[np.triu_indices(6)] = tot[:21]
+    return A, np.array(tot[21:])
+
+
+def test_warp_update_is_bit_identical_to_the_point_by_point_sums() -> None:
+    """The two-pass (vectorised terms, ordered sums) normal equations give the bytes of the point-by-point sums:
+    sizes around the chunk and block lengths, points outside the image (z' = 0), signed zeros."""
+    rng = np.random.default_rng(11)
+    for n in (1, 63, 64, 65, 1023, 1024, 1025, 2500):
+        buf = rng.normal(size=(n, BUF_COLS)) * np.array([1, 1, 0, 1e3, 1e3, 1e3, 50, 50])
+        buf[:, 2] = rng.uniform(0.5, 4.0, n)
+        buf[rng.random(n) < 0.3] = 0.0
+        buf[rng.random(n) < 0.1, 6] = -0.0
+        want = _warp_update_point_by_point(buf)
+        for fn in (warp_update, warp_update_parallel):
+            A, b = fn(buf)
+            assert A.tobytes() == want[0].tobytes() and b.tobytes() == want[1].tobytes(), (n, fn)
 
 
 def test_warp_update_numba_equals_numpy_and_explicit_jacobian() -> None:

@@ -10,6 +10,15 @@ Sums are formed per fixed block of :data:`BLOCK` points and combined in block or
 so the serial and the ``prange`` kernels give bit-identical results for any thread count. Arithmetic is
 float64 on float32 storage; ``error_model="numpy"`` (a division by zero gives inf/nan — e.g. a point with
 z' = 0 fails the image test — instead of raising).
+
+Grey (N = 1) has its own kernel (:func:`_grey_block`): the same IEEE arithmetic, point by point, split into
+passes over chunks of :data:`CHUNK` points so that LLVM vectorises all but the sums — the projection, the
+bilinear samples (gathers), the weights and the buffer rows are computed for 4 points at once, and only the
+sums over points (error, usage, Gray-A's affine sums) run point by point in the original order. Outside points
+are computed too (on a clamped pixel) and masked with :func:`select`; a masked point adds +0.0 to the sums,
+which leaves them unchanged (they start at +0.0 and never become −0.0), so every result is bit-identical to
+the point-by-point loop of :func:`_eval_block`. The chunk's intermediate rows live on the stack
+(:func:`scratch_f64`), one small array per row, which tells LLVM that they cannot alias the input arrays.
 """
 
 from __future__ import annotations
@@ -18,6 +27,9 @@ import math
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.core.errors import TypingError
+from numba.extending import intrinsic
 
 from dmtrack.odometry._fastmath import FASTMATH, pin_cached
 
@@ -36,6 +48,54 @@ N_PARAMS = 12
 
 #: Columns of the per-block partial sums of :func:`eval_pass`.
 _NE = 10
+
+#: Points per pass of the grey kernel (a divisor of :data:`BLOCK`): its 17 stack rows (17 KiB) stay in L1.
+CHUNK = 128
+
+
+# ============================================================================== vectorisation helpers
+@intrinsic
+def select(typingctx, cond, a, b):  # pragma: no cover - compiled
+    """``a if cond else b`` without a branch (an LLVM ``select``; both sides are computed, IEEE results).
+
+    numba lowers a conditional expression to branches, which keep LLVM from vectorising a loop; a select does
+    not. Both values must have the same numeric type.
+    """
+    if not isinstance(cond, types.Boolean) or a != b:
+        raise TypingError(f"select(bool, x, y) needs x and y of one type, got {cond}, {a}, {b}")
+    sig = a(cond, a, b)
+
+    def codegen(context, builder, signature, args):
+        return builder.select(args[0], args[1], args[2])
+
+    return sig, codegen
+
+
+def _scratch(dtype: types.Type):  # type: ignore[no-untyped-def]
+    @intrinsic
+    def scratch(typingctx, size):  # pragma: no cover - compiled
+        if not isinstance(size, types.IntegerLiteral):
+            raise TypingError("scratch arrays need a compile-time constant size (a module-level int)")
+        n = size.literal_value
+
+        def codegen(context, builder, signature, args):
+            with builder.goto_entry_block():
+                ptr = builder.alloca(context.get_value_type(dtype), size=context.get_constant(types.intp, n))
+                ptr.align = 64
+            return ptr
+
+        return types.CPointer(dtype)(size), codegen
+
+    return scratch
+
+
+#: ``scratch_f64(N)`` / ``scratch_i64(N)``: a stack array of N (a module-level constant) float64 / int64, as a
+#: raw pointer indexed ``p[j]``, valid until the calling function returns. LLVM knows that a stack array that
+#: never escapes cannot alias any argument, so loops that store into it and read (e.g. gather from) input arrays
+#: need no run-time overlap checks and vectorise. Keep one array per quantity: LLVM stops tracking a pointer
+#: after a limited number of uses and then assumes it may alias everything.
+scratch_f64 = _scratch(types.float64)
+scratch_i64 = _scratch(types.int64)
 
 
 def eval_params(
@@ -300,6 +360,250 @@ def _combine_eval(part: np.ndarray) -> tuple[int, float, int, int, float, float,
     return (int(tot[0]), tot[1], int(tot[2]), int(tot[3]), tot[4], tot[5], tot[6], tot[7], tot[8], tot[9])
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _grey_block(
+    blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags, buf, part
+):  # pragma: no cover - compiled
+    """:func:`_eval_block` for N = 1 (``packed`` (h, w, 3, 1) C-contiguous), in vectorised passes per chunk.
+
+    Per chunk of :data:`CHUNK` points: (A) pose, projection, image test, bilinear weights and pixel offsets;
+    (B) the bilinear samples (F, gx, gy); (C) residual, weights, Huber, good test and the buffer rows (zero
+    outside the image); (D) the sums, point by point in order. Same operations on the same values as
+    :func:`_eval_block`, so bit-identical results. Indices into the chunk's views count from 0 and the pixel
+    offsets are unsigned, so that numba's negative-index handling does not hide the access pattern from LLVM.
+    """
+    n = points.shape[0]
+    h, w = packed.shape[0], packed.shape[1]
+    fx, fy, cx, cy, aff_a, aff_b = prm[P_FX], prm[P_FY], prm[P_CX], prm[P_CY], prm[P_A], prm[P_B]
+    var_weight, noise2, huber_half = prm[P_VAR_WEIGHT], prm[P_NOISE2], prm[P_HUBER_HALF]
+    good_den_c, good_g, aff_thr = prm[P_GOOD_C], prm[P_GOOD_G], prm[P_AFF_THR]
+    huber2 = huber_half * huber_half
+    r00, r01, r02, tx = T[0, 0], T[0, 1], T[0, 2], T[0, 3]
+    r10, r11, r12, ty = T[1, 0], T[1, 1], T[1, 2], T[1, 3]
+    r20, r21, r22, tz = T[2, 0], T[2, 1], T[2, 2], T[2, 3]
+    umax = w - 2.0
+    vmax = h - 2.0
+    row = np.uint64(3 * w)  # floats per image row of packed
+    u1, u2, u3, u4, u5 = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4), np.uint64(5)
+    pk = packed.reshape(h * w * 3)
+    # stack rows of one chunk (see scratch_f64)
+    s_wx = scratch_f64(CHUNK)
+    s_wy = scratch_f64(CHUNK)
+    s_wz = scratch_f64(CHUNK)
+    s_w11 = scratch_f64(CHUNK)
+    s_w01 = scratch_f64(CHUNK)
+    s_w10 = scratch_f64(CHUNK)
+    s_w00 = scratch_f64(CHUNK)
+    s_g0 = scratch_f64(CHUNK)
+    s_g1 = scratch_f64(CHUNK)
+    s_dc = scratch_f64(CHUNK)
+    s_in = scratch_f64(CHUNK)
+    s_iv = scratch_f64(CHUNK)
+    s_gx = scratch_f64(CHUNK)
+    s_gy = scratch_f64(CHUNK)
+    s_err = scratch_f64(CHUNK)
+    s_good = scratch_f64(CHUNK)
+    s_c1 = scratch_f64(CHUNK)
+    s_off = scratch_i64(CHUNK)
+    n_in = 0
+    err = 0.0
+    good = 0
+    bad = 0
+    usage = 0.0
+    a_xx = 0.0
+    a_yy = 0.0
+    a_x = 0.0
+    a_y = 0.0
+    a_w = 0.0
+    i0 = blk * BLOCK
+    i1 = min(n, i0 + BLOCK)
+    for c0 in range(i0, i1, CHUNK):
+        c1 = min(i1, c0 + CHUNK)
+        m = c1 - c0
+        pts = points[c0:c1].reshape(3 * m)
+        vals = ref_vals[c0:c1].reshape(m)
+        vrs = ref_vars[c0:c1]
+        bf = buf[c0:c1].reshape(BUF_COLS * m)
+        # (A) projection; outside points are sampled at pixel (2, 2) and masked later
+        for j in range(m):
+            px = np.float64(pts[3 * j])
+            py = np.float64(pts[3 * j + 1])
+            pz = np.float64(pts[3 * j + 2])
+            wx = r00 * px + r01 * py + r02 * pz + tx
+            wy = r10 * px + r11 * py + r12 * pz + ty
+            wz = r20 * px + r21 * py + r22 * pz + tz
+            iz = 1.0 / wz
+            u = (wx * iz) * fx + cx
+            v = (wy * iz) * fy + cy
+            inside = (u > 1.0) & (v > 1.0) & (u < umax) & (v < vmax)
+            u = select(inside, u, 2.0)
+            v = select(inside, v, 2.0)
+            ix = int(u)
+            iy = int(v)
+            dx = u - ix
+            dy = v - iy
+            dxdy = dx * dy
+            zd = pz * iz * iz  # 1 / (z'² d) with d = 1/z_ref
+            s_wx[j] = wx
+            s_wy[j] = wy
+            s_wz[j] = wz
+            s_w11[j] = dxdy
+            s_w01[j] = dy - dxdy
+            s_w10[j] = dx - dxdy
+            s_w00[j] = 1.0 - dx - dy + dxdy
+            s_g0[j] = (tx * wz - tz * wx) * zd
+            s_g1[j] = (ty * wz - tz * wy) * zd
+            s_dc[j] = pz * iz
+            s_in[j] = select(inside, 1.0, 0.0)
+            s_off[j] = (iy * w + ix) * 3
+        # (B) bilinear (F, gx, gy)
+        for j in range(m):
+            o = np.uint64(s_off[j])
+            o1 = o + row
+            w11 = s_w11[j]
+            w01 = s_w01[j]
+            w10 = s_w10[j]
+            w00 = s_w00[j]
+            s_iv[j] = w11 * pk[o1 + u3] + w01 * pk[o1] + w10 * pk[o + u3] + w00 * pk[o]
+            s_gx[j] = w11 * pk[o1 + u4] + w01 * pk[o1 + u1] + w10 * pk[o + u4] + w00 * pk[o + u1]
+            s_gy[j] = w11 * pk[o1 + u5] + w01 * pk[o1 + u2] + w10 * pk[o + u5] + w00 * pk[o + u2]
+        # (C) residual, weights, Huber, good test, buffer rows
+        for j in range(m):
+            iv = s_iv[j]
+            gx = s_gx[j]
+            gy = s_gy[j]
+            c1v = aff_a * vals[j] + aff_b
+            r = c1v - iv
+            r2sum = 0.0 + r * r
+            g2sum = 0.0 + (gx * gx + gy * gy)
+            gxf = fx * gx
+            gyf = fy * gy
+            drpdd = gxf * s_g0[j] + gyf * s_g1[j]
+            s2 = var_weight * vrs[j]
+            wp = 1.0 / (noise2 + s2 * drpdd * drpdd)
+            e2 = r * r * wp
+            ww = select(e2 < huber2, wp, wp * huber_half / math.sqrt(e2))
+            ins = s_in[j] != 0.0
+            k = BUF_COLS * j
+            bf[k] = select(ins, s_wx[j], 0.0)
+            bf[k + 1] = select(ins, s_wy[j], 0.0)
+            bf[k + 2] = select(ins, s_wz[j], 0.0)
+            bf[k + 3] = select(ins, 0.0 + ww * gxf * gxf, 0.0)
+            bf[k + 4] = select(ins, 0.0 + ww * gxf * gyf, 0.0)
+            bf[k + 5] = select(ins, 0.0 + ww * gyf * gyf, 0.0)
+            bf[k + 6] = select(ins, 0.0 + ww * r * gxf, 0.0)
+            bf[k + 7] = select(ins, 0.0 + ww * r * gyf, 0.0)
+            s_err[j] = select(ins, ww * r * r, 0.0)
+            s_good[j] = select(r2sum < good_den_c + good_g * g2sum, 1.0, 0.0)
+            s_c1[j] = c1v
+        # (D) sums in point order; a masked point adds +0.0 (no change)
+        if affine_sums:
+            for j in range(m):
+                if s_in[j] != 0.0:
+                    c1v = s_c1[j]
+                    iv = s_iv[j]
+                    ar = abs(c1v - iv)
+                    aw = 1.0 if ar < aff_thr else aff_thr / ar
+                    a_xx += c1v * c1v * aw
+                    a_yy += iv * iv * aw
+                    a_x += c1v * aw
+                    a_y += iv * aw
+                    a_w += aw
+        for j in range(m):
+            ins = s_in[j] != 0.0
+            is_good = s_good[j] != 0.0
+            n_in += ins
+            good += ins & is_good
+            bad += ins & (not is_good)
+        for j in range(m):
+            dc = s_dc[j]
+            err += s_err[j]
+            usage += select(s_in[j] != 0.0, select(dc < 1.0, dc, 1.0), 0.0)
+        if write_flags:
+            fi = ref_idx[c0:c1]
+            for j in range(m):
+                flags[fi[j]] = (s_in[j] != 0.0) & (s_good[j] != 0.0)
+    p = part[blk]
+    p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9] = n_in, err, good, bad, usage, a_xx, a_yy, a_x, a_y, a_w
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _eval_grey(
+    points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags, write_flags, buf
+):  # pragma: no cover - compiled
+    """The grey evaluation, blocks in order on the calling thread."""
+    nb = (points.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NE))
+    for blk in range(nb):
+        _grey_block(blk, points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags,
+                    buf, part)  # fmt: skip
+    return _combine_eval(part)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def _eval_grey_parallel(
+    points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags, write_flags, buf
+):  # pragma: no cover - compiled
+    """The grey evaluation, blocks over numba's threads (``prange``)."""
+    nb = (points.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NE))
+    for blk in numba.prange(nb):  # prange's index is unsigned: one compiled block function for both loops
+        _grey_block(np.int64(blk), points, ref_vals, ref_vars, ref_idx, packed, T, prm, affine_sums, flags, write_flags,
+                    buf, part)  # fmt: skip
+    return _combine_eval(part)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def eval_pass_parallel(
+    points: np.ndarray,
+    ref_vals: np.ndarray,
+    ref_vars: np.ndarray,
+    ref_idx: np.ndarray,
+    feat: np.ndarray,
+    packed: np.ndarray,
+    T: np.ndarray,
+    prm: np.ndarray,
+    affine_sums: bool,
+    flags: np.ndarray,
+    write_flags: bool,
+    buf: np.ndarray,
+) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
+    """:func:`eval_pass` with the blocks distributed over numba's threads (``prange``); the result does not
+    depend on the thread count (fixed blocks, combined in order). The general kernel, for any N (for N = 1
+    bit-identical to the grey kernel of :func:`eval_kernels`, which the tracker runs instead)."""
+    nb = (points.shape[0] + BLOCK - 1) // BLOCK
+    part = np.empty((nb, _NE))
+    for blk in numba.prange(nb):
+        _eval_block(blk, points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags,
+                    write_flags, buf, part)  # fmt: skip
+    return _combine_eval(part)
+
+
+def _eval_multi(*args):  # type: ignore[no-untyped-def]
+    """:func:`eval_pass_parallel` on one thread: the serial multichannel evaluation is the same compiled code
+    as the threaded one, so the two are bit-identical by construction. (Two separately compiled kernels are not:
+    the vectorised float32 channel loop lets LLVM choose its reduction order per compilation context, and a
+    serial and a ``prange`` caller may end up with different ones.)"""
+    prev = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        return eval_pass_parallel(*args)
+    finally:
+        numba.set_num_threads(prev)
+
+
+def eval_kernels(n_channels: int) -> tuple:
+    """(serial, threaded) compiled evaluation for ``n_channels`` channels, each called like :func:`eval_pass`.
+
+    Grey has its own vectorised kernel (IEEE arithmetic: its serial and ``prange`` builds agree bit for bit);
+    the others run the multichannel kernel, the serial one on a single thread. Only the kernel a run uses is
+    compiled.
+    """
+    if n_channels == 1:
+        return _eval_grey, _eval_grey_parallel
+    return _eval_multi, eval_pass_parallel
+
+
 def eval_pass(
     points: np.ndarray,
     ref_vals: np.ndarray,
@@ -329,48 +633,17 @@ def eval_pass(
 
     Writes ``buf[i] = (x', y', z', Sxx, Sxy, Syy, sx, sy)`` for every in-image point i and zeros for the
     others (z' = 0 marks them). Sums are formed per block of :data:`BLOCK` points and combined in order.
+    All arrays C-contiguous.
 
     Returns
     -------
     (n_in, Σ W r², good, bad, Σ min(1, z/z'), affine sums sxx, syy, sx, sy, sw)
 
-    Runs :func:`eval_pass_parallel` on one thread: the serial and the threaded evaluation are the *same*
-    compiled code, so they are bit-identical by construction. (Two separately compiled kernels are not: the
-    vectorised float32 channel loop lets LLVM choose its reduction order per compilation context, and a
-    serial and a ``prange`` caller may end up with different ones.)
+    Runs on the calling thread, with the kernel for ``ref_vals.shape[1]`` channels (see :func:`eval_kernels`);
+    :func:`eval_pass_parallel` gives bit-identical results on numba's threads.
     """
-    prev = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        return eval_pass_parallel(points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags,
-                                  write_flags, buf)  # fmt: skip
-    finally:
-        numba.set_num_threads(prev)
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def eval_pass_parallel(
-    points: np.ndarray,
-    ref_vals: np.ndarray,
-    ref_vars: np.ndarray,
-    ref_idx: np.ndarray,
-    feat: np.ndarray,
-    packed: np.ndarray,
-    T: np.ndarray,
-    prm: np.ndarray,
-    affine_sums: bool,
-    flags: np.ndarray,
-    write_flags: bool,
-    buf: np.ndarray,
-) -> tuple[int, float, int, int, float, float, float, float, float, float]:  # pragma: no cover
-    """:func:`eval_pass` with the blocks distributed over numba's threads (``prange``); the result does not
-    depend on the thread count (fixed blocks, combined in order)."""
-    nb = (points.shape[0] + BLOCK - 1) // BLOCK
-    part = np.empty((nb, _NE))
-    for blk in numba.prange(nb):
-        _eval_block(blk, points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm, affine_sums, flags,
-                    write_flags, buf, part)  # fmt: skip
-    return _combine_eval(part)
+    return eval_kernels(ref_vals.shape[1])[0](points, ref_vals, ref_vars, ref_idx, feat, packed, T, prm,
+                                              affine_sums, flags, write_flags, buf)  # fmt: skip
 
 
 def eval_pass_numpy(

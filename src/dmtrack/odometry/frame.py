@@ -7,7 +7,8 @@ on the one-pixel border; ``max_grad`` is the 3×3 max filter of the channel-mean
 the border).
 
 Two implementations of the per-level computations exist: a plain numpy reference (``*_numpy``) and numba
-kernels (used by :func:`build_frame`); ``tests/odometry/test_frame.py`` checks that they agree.
+kernels (used by :func:`build_frame`); ``tests/odometry/test_frame.py`` checks that they agree. Grey (N = 1) has
+its own serial kernels on flat row views, which LLVM vectorises (the same float32 arithmetic, so the same bits).
 """
 
 from __future__ import annotations
@@ -297,21 +298,121 @@ def pack_numpy(feat: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.stack([f, gx, gy], axis=-2))
 
 
+@numba.njit(cache=True, nogil=True)
+def _pack_grey_kernel(feat: np.ndarray, packed: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`_pack_kernel` for N = 1: the same float32 arithmetic on flat row views, which LLVM vectorises."""
+    h, w = feat.shape[0], feat.shape[1]
+    half = np.float32(0.5)
+    for y in range(h):
+        f = feat[y].reshape(w)
+        p = packed[y].reshape(3 * w)
+        if y == 0 or y == h - 1:
+            for x in range(w):
+                p[3 * x] = f[x]
+                p[3 * x + 1] = 0.0
+                p[3 * x + 2] = 0.0
+            continue
+        fu = feat[y - 1].reshape(w)
+        fd = feat[y + 1].reshape(w)
+        for x in range(w - 2):  # interior pixel x + 1
+            p[3 * x + 3] = f[x + 1]
+            p[3 * x + 4] = half * (f[x + 2] - f[x])
+            p[3 * x + 5] = half * (fd[x + 1] - fu[x + 1])
+        for x in (0, w - 1):
+            p[3 * x] = f[x]
+            p[3 * x + 1] = 0.0
+            p[3 * x + 2] = 0.0
+
+
 def pack(feat: np.ndarray) -> np.ndarray:
     """:func:`pack_numpy` as one numba pass (the tracker's sampling layout; no gradient arrays, no max_grad)."""
     f = np.ascontiguousarray(feat, dtype=np.float32)
     h, w, n = f.shape
     out = np.empty((h, w, 3, n), np.float32)
-    _pack_kernel(f, out)
+    if n == 1:
+        _pack_grey_kernel(f, out)
+    else:
+        _pack_kernel(f, out)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _downsample_grey_kernel(feat: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`_downsample_kernel` for N = 1 on flat row views (vectorised by LLVM; same float32 arithmetic)."""
+    h2, w2 = out.shape[0], out.shape[1]
+    w = feat.shape[1]
+    quarter = np.float32(0.25)
+    for y in range(h2):
+        a = feat[2 * y].reshape(w)
+        b = feat[2 * y + 1].reshape(w)
+        o = out[y].reshape(w2)
+        for x in range(w2):
+            o[x] = ((a[2 * x] + a[2 * x + 1]) + (b[2 * x] + b[2 * x + 1])) * quarter
 
 
 def downsample(feat: np.ndarray) -> np.ndarray:
     """2×2 box mean per channel (numba): (h, w, N) float32 → (h//2, w//2, N) float32."""
     h, w, n = feat.shape
     out = np.empty((h // 2, w // 2, n), np.float32)
-    _downsample_kernel(np.ascontiguousarray(feat, dtype=np.float32), out)
+    kernel = _downsample_grey_kernel if n == 1 else _downsample_kernel
+    kernel(np.ascontiguousarray(feat, dtype=np.float32), out)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _gradients_grey_kernel(
+    feat: np.ndarray, gx: np.ndarray, gy: np.ndarray, gmean: np.ndarray, max_grad: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """:func:`_gradients_kernel` for N = 1 on flat row views (vectorised by LLVM; same float32 arithmetic, and
+    the 3×3 maximum taken in the same order)."""
+    h, w = feat.shape[0], feat.shape[1]
+    half = np.float32(0.5)
+    one = np.float32(1)
+    for y in range(h):
+        ox = gx[y].reshape(w)
+        oy = gy[y].reshape(w)
+        om = gmean[y].reshape(w)
+        if y == 0 or y == h - 1:
+            for x in range(w):
+                ox[x] = 0.0
+                oy[x] = 0.0
+                om[x] = 0.0
+            continue
+        f = feat[y].reshape(w)
+        fu = feat[y - 1].reshape(w)
+        fd = feat[y + 1].reshape(w)
+        for x in range(w - 2):  # interior pixel x + 1
+            dx = half * (f[x + 2] - f[x])
+            dy = half * (fd[x + 1] - fu[x + 1])
+            ox[x + 1] = dx
+            oy[x + 1] = dy
+            om[x + 1] = np.sqrt(dx * dx + dy * dy) / one
+        for x in (0, w - 1):
+            ox[x] = 0.0
+            oy[x] = 0.0
+            om[x] = 0.0
+    for y in range(h):
+        o = max_grad[y]
+        if y == 0 or y == h - 1:
+            for x in range(w):
+                o[x] = 0.0
+            continue
+        a = gmean[y - 1]
+        b = gmean[y]
+        c = gmean[y + 1]
+        for x in range(w - 2):  # interior pixel x + 1: window columns x, x + 1, x + 2
+            m = a[x]
+            m = a[x + 1] if a[x + 1] > m else m
+            m = a[x + 2] if a[x + 2] > m else m
+            m = b[x] if b[x] > m else m
+            m = b[x + 1] if b[x + 1] > m else m
+            m = b[x + 2] if b[x + 2] > m else m
+            m = c[x] if c[x] > m else m
+            m = c[x + 1] if c[x + 1] > m else m
+            m = c[x + 2] if c[x + 2] > m else m
+            o[x + 1] = m
+        o[0] = 0.0
+        o[w - 1] = 0.0
 
 
 def gradients(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -322,7 +423,8 @@ def gradients(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     gy = np.empty_like(f)
     gmean = np.empty((h, w), np.float32)
     mg = np.empty((h, w), np.float32)
-    _gradients_kernel(f, gx, gy, gmean, mg)
+    kernel = _gradients_grey_kernel if n == 1 else _gradients_kernel
+    kernel(f, gx, gy, gmean, mg)
     return gx, gy, mg
 
 

@@ -45,10 +45,11 @@ from dmtrack.odometry._tracker_points import idepth_downsample, idepth_downsampl
 from dmtrack.odometry._tracker_residuals import (
     BLOCK,
     BUF_COLS,
+    P_A,
+    P_B,
+    eval_kernels,
     eval_params,
-    eval_pass,
     eval_pass_numpy,
-    eval_pass_parallel,
 )
 from dmtrack.odometry.config import ChannelRule, TrackerConfig
 from dmtrack.odometry.frame import Frame
@@ -220,6 +221,17 @@ class TrackResult:
 
 
 @dataclass
+class _LevelEval:
+    eval_fn: Any
+    update_fn: Any
+    arrays: tuple[np.ndarray, ...]
+    prm: np.ndarray
+    affine: bool
+    flags: np.ndarray
+    write_flags: bool
+
+
+@dataclass
 class _Eval:
     n_in: int
     error: float
@@ -273,34 +285,21 @@ class Tracker:
         self.use_numba = use_numba
         self.parallel = parallel
         self.parallel_min_points = int(parallel_min_points)
-        self._eval_fn: Any
-        self._update_fn: Any
-        if not use_numba:
-            self._eval_fn, self._update_fn = eval_pass_numpy, warp_update_numpy
-        else:
-            self._eval_fn, self._update_fn = eval_pass, warp_update
 
-    def _kernels(self, n_points: int) -> tuple[Any, Any]:
-        """(evaluation, normal-equation) functions for a level with ``n_points`` reference points."""
-        if self.use_numba and self.parallel and n_points >= self.parallel_min_points:
-            return eval_pass_parallel, warp_update_parallel
-        return self._eval_fn, self._update_fn
+    def _kernels(self, n_points: int, n_channels: int) -> tuple[Any, Any]:
+        """(evaluation, normal-equation) functions for a level with ``n_points`` points of ``n_channels``."""
+        if not self.use_numba:
+            return eval_pass_numpy, warp_update_numpy
+        serial, threaded = eval_kernels(n_channels)
+        if self.parallel and n_points >= self.parallel_min_points:
+            return threaded, warp_update_parallel
+        return serial, warp_update
 
     # ------------------------------------------------------------------ one evaluation
-    def _evaluate(
-        self,
-        rl: ReferenceLevel,
-        frame_level: Any,
-        T: np.ndarray,
-        a: float,
-        b: float,
-        flags: np.ndarray,
-        write_flags: bool,
-        buf: np.ndarray,
-        ch_scale: float,
-        eval_fn: Any = None,
-        good_fac: float = 1.0,
-    ) -> _Eval:
+    def _level_eval(
+        self, rl: ReferenceLevel, frame_level: Any, flags: np.ndarray, write_flags: bool, good_fac: float
+    ) -> _LevelEval:
+        """The per-level constant part of every evaluation (kernel, arrays, parameters)."""
         cfg = self.config
         cam = frame_level.camera
         prm = eval_params(
@@ -308,8 +307,8 @@ class Tracker:
             cam.fy,
             cam.cx,
             cam.cy,
-            a,
-            b,
+            1.0,
+            0.0,
             cfg.var_weight,
             cfg.camera_pixel_noise2,
             cfg.huber_d / 2.0,
@@ -317,20 +316,19 @@ class Tracker:
             cfg.good_grad_weight**2,
             cfg.affine_huber,
         )
-        fn = self._eval_fn if eval_fn is None else eval_fn
-        n_in, err, good, bad, usage, sxx, syy, sx, sy, sw = fn(
-            rl.points,
-            rl.values,
-            rl.variances,
-            rl.pixel_index,
-            frame_level.feat,
-            frame_level.packed if (rl.values.shape[1] == 1 or cfg.affine) else _placeholder(rl.values.shape[1]),
-            T,
-            prm,
-            bool(cfg.affine),
-            flags,
-            write_flags,
-            buf,
+        nch = rl.values.shape[1]
+        packed = frame_level.packed if (nch == 1 or cfg.affine) else _placeholder(nch)
+        eval_fn, update_fn = self._kernels(rl.n_points, nch)
+        arrays = (rl.points, rl.values, rl.variances, rl.pixel_index, frame_level.feat, packed)
+        return _LevelEval(eval_fn, update_fn, arrays, prm, bool(cfg.affine), flags, write_flags)
+
+    def _evaluate(self, lv: _LevelEval, T: np.ndarray, a: float, b: float, buf: np.ndarray, ch_scale: float) -> _Eval:
+        cfg = self.config
+        prm = lv.prm
+        prm[P_A] = a
+        prm[P_B] = b
+        n_in, err, good, bad, usage, sxx, syy, sx, sy, sw = lv.eval_fn(
+            *lv.arrays, T, prm, lv.affine, lv.flags, lv.write_flags, buf
         )
         a_new, b_new = 1.0, 0.0
         if cfg.affine and sw > 0:
@@ -421,9 +419,10 @@ class Tracker:
             write = lvl == min_level
             thr = cfg.min_inlier_fraction * fl.width * fl.height
             bufs = [np.empty((rl.n_points, BUF_COLS)), np.empty((rl.n_points, BUF_COLS))]
-            eval_fn, update_fn = self._kernels(rl.n_points)
+            lv = self._level_eval(rl, fl, flags, write, good_fac)
+            update_fn = lv.update_fn
             cur = 0
-            ev = self._evaluate(rl, fl, T, a, b, flags, write, bufs[cur], ch_scale, eval_fn, good_fac)
+            ev = self._evaluate(lv, T, a, b, bufs[cur], ch_scale)
             evaluations[lvl] = 1
             iterations[lvl] = 0
             last = ev
@@ -445,9 +444,7 @@ class Tracker:
                     inc = self._solve(A, bvec, lam)
                     inc_try += 1
                     T_new = se3_exp(inc) @ T
-                    trial = self._evaluate(
-                        rl, fl, T_new, a, b, flags, write, bufs[1 - cur], ch_scale, eval_fn, good_fac
-                    )
+                    trial = self._evaluate(lv, T_new, a, b, bufs[1 - cur], ch_scale)
                     evaluations[lvl] += 1
                     last = trial
                     if trial.n_in < thr:

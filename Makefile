@@ -1,4 +1,4 @@
-# Quick start: `make demo` runs dmtrack on the sample sequence shipped in data/;
+# Quick start: `make demo` compiles the grey kernels once and runs dmtrack on the sample sequence shipped in data/;
 # `make test` runs the linter and the test suite (with the learned features: torch 2.13.0 CPU).
 # Each creates .venv and installs what it needs.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
@@ -24,6 +24,7 @@ $(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
 
 demo: $(VENV)/.installed
 	$(BIN)/dmtrack info $(SAMPLE)
+	$(BIN)/dmtrack warmup --feature gray  # numba compiles once into its cache; the run then shows its steady speed
 	$(BIN)/dmtrack run $(SAMPLE) --feature gray --out $(OUT)
 
 test: $(VENV)/.installed-dev

@@ -173,3 +173,13 @@ def test_calibrate_camera_is_a_command_with_one_line_errors(tmp_path: Path, caps
     err = capsys.readouterr().err.strip()
     assert code == 1 and len(err.splitlines()) == 1 and "blank" in err
     assert not (tmp_path / "camera.txt").exists()
+
+
+def test_run_prints_the_compile_time_apart_from_the_speed(tmp_path: Path, sample_dir: Path, capsys) -> None:
+    args = ["run", str(sample_dir), "--max-frames", "5", "--out", str(tmp_path), "--no-depth-images", "--no-pointcloud"]
+    assert main(args) == 0
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    speed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("speed: ")]
+    assert len(speed) == 1 and speed[0].startswith(f"speed: {m['fps']:.1f} fps  (per frame: ")
+    compiled = f"kernels compiled/loaded in {m['compile_s']:.1f} s before the first frame, not counted"
+    assert speed[0].endswith(f"); {compiled}")

@@ -121,19 +121,25 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_run(args: argparse.Namespace) -> int:
+def _limit_threads(threads: int | None) -> None:
+    """``--threads N``: the threads of the kernels and of the features (before numba is imported)."""
     import os
+
+    if threads is None:
+        return
+    from dmtrack.errors import InputError
+    from dmtrack.experiments.task import limit_threads
+
+    if threads < 1:
+        raise InputError(f"--threads must be ≥ 1, got {threads}")
+    os.environ["DMTRACK_FEATURE_THREADS"] = str(threads)
+    limit_threads(threads)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    if args.threads is not None:
-        from dmtrack.errors import InputError
-        from dmtrack.experiments.task import limit_threads
-
-        if args.threads < 1:
-            raise InputError(f"--threads must be ≥ 1, got {args.threads}")
-
-        os.environ["DMTRACK_FEATURE_THREADS"] = str(args.threads)
-        limit_threads(args.threads)
+    _limit_threads(args.threads)
 
     from dmtrack.api import run_to_directory
     from dmtrack.odometry.config import VOConfig
@@ -181,7 +187,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if m.get("realtime"):
         print(f"realtime: {m['dropped_frames']} frames dropped")
     print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms, "
-          f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms)")
+          f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms); "
+          f"kernels compiled/loaded in {m['compile_s']:.1f} s before the first frame, not counted")
     if m.get("ate_rmse") is not None:
         print(f"accuracy: RPE rotation {m['rpe_rot_deg_per_m']:.3f} deg/unit, translation angle "
               f"{m['rpe_trans_angle_deg_per_m']:.3f} deg/unit (r_l = {m['r_l']:.4g}), ATE {m['ate_rmse']:.4f} "
@@ -203,6 +210,48 @@ def _run_viewers(args: argparse.Namespace) -> tuple[Any, tuple[Any, ...]]:
 
     seq = open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics)
     return seq, (RerunSink(spawn=args.viewer, rrd=args.rrd, groundtruth=seq.groundtruth, align=umeyama),)
+
+
+def _kernel_counts() -> tuple[int, int, set[str]]:
+    """numba's compilations and cache loads so far in dmtrack's kernels, and the cache folders they use."""
+    from numba.core.dispatcher import Dispatcher
+
+    kernels = {id(v): v for name, mod in list(sys.modules.items()) if name.startswith("dmtrack.") and mod is not None
+               for v in vars(mod).values() if isinstance(v, Dispatcher)}  # fmt: skip
+    stats = [k.stats for k in kernels.values()]
+    compiled = sum(sum(st.cache_misses.values()) for st in stats)
+    loaded = sum(sum(st.cache_hits.values()) for st in stats)
+    return compiled, loaded, {st.cache_path for st in stats if st.cache_path}
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    import os
+
+    _limit_threads(args.threads)
+
+    from dmtrack.errors import InputError
+    from dmtrack.features import feature_names, get_feature
+    from dmtrack.pipeline import warm_up
+
+    names = feature_names() if args.all else (args.feature or ["gray"])
+    compiled, loaded, _ = _kernel_counts()
+    for name in names:
+        try:
+            feature = get_feature(name)
+            seconds = warm_up(feature, strict=True)
+        except Exception as e:  # e.g. weights not downloaded, torch not installed
+            if not args.all:
+                raise
+            print(f"{name:<14} skipped: {type(e).__name__}: {e}" if not isinstance(e, InputError) else
+                  f"{name:<14} skipped: {e}")
+            continue
+        c, lo, _ = _kernel_counts()
+        print(f"{name:<14} {seconds:6.1f} s  ({c - compiled} kernels compiled, {lo - loaded} loaded from the cache)")
+        compiled, loaded = c, lo
+    caches = _kernel_counts()[2]
+    where = os.path.commonpath(sorted(caches)) if caches else "none (numba caching is off)"
+    print(f"numba's cache: {where}")
+    return 0
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -374,6 +423,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rrd", metavar="FILE", help="record the live view to a Rerun file (open it with `rerun FILE`)")
     p.set_defaults(func=cmd_run)
 
+    p = sub.add_parser("warmup", help="compile the kernels of features into numba's cache (once after installing)",
+                       description="Compile (or load from numba's cache) every kernel a run with the feature calls, "
+                       "and print the time per feature; later runs then start at once. `dmtrack run` does the same "
+                       "before its first frame (compile_s in metrics.json), so its fps never counts compilation.")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--feature", action="append", metavar="NAME", help="feature (repeatable; default gray)")
+    group.add_argument("--all", action="store_true", help="every feature of `dmtrack features` (those that cannot "
+                       "be built here, e.g. without their weights, are skipped)")
+    p.add_argument("--threads", type=int, metavar="N", help="for runs with --threads N (default: all cores; one "
+                   "thread and several use different kernels)")
+    p.set_defaults(func=cmd_warmup)
+
     p = sub.add_parser("view", help="show a finished run folder in the Rerun viewer, or write it to an .rrd file")
     p.add_argument("run_dir", metavar="RUN_DIR", help="a folder written by `dmtrack run`")
     p.add_argument("--rrd", metavar="FILE", help="write a Rerun file instead of opening the viewer")
@@ -480,11 +541,42 @@ def _terminate_as_interrupt() -> None:
             signal.signal(getattr(signal, name), handler)
 
 
+def _numba_cache_fallback() -> None:
+    """numba caches the compiled kernels next to the package's sources, else in the user's cache folder; where it can
+    write to neither (a read-only installation and a read-only home), it refuses to import a kernel ("no locator
+    available"). Then it caches them in a folder of the temporary directory instead (``NUMBA_CACHE_DIR``)."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    if os.environ.get("NUMBA_CACHE_DIR") or "numba" in sys.modules:
+        return
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    for folder in (Path(__file__).resolve().parent / "odometry" / "__pycache__", Path(home) / "numba"):
+        try:  # numba's own test of a cache folder
+            folder.mkdir(parents=True, exist_ok=True)
+            tempfile.TemporaryFile(dir=folder).close()
+            return
+        except OSError:
+            continue
+    # a private folder (cached kernels are machine code): this user's own, or else a new one for this process
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    folder = Path(tempfile.gettempdir()) / f"dmtrack-numba-cache-{uid}"
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        st = folder.stat()
+        private = uid is not None and st.st_uid == uid and not st.st_mode & 0o077 and not folder.is_symlink()
+    except OSError:
+        private = False
+    os.environ["NUMBA_CACHE_DIR"] = str(folder) if private else tempfile.mkdtemp(prefix="dmtrack-numba-cache-")
+
+
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     warnings.showwarning = _showwarning
     _terminate_as_interrupt()
+    _numba_cache_fallback()
     try:
         return int(args.func(args) or 0)
     except DmtrackError as e:

@@ -11,6 +11,11 @@ Live sources (``camera:N``, ``rtsp://…``; :mod:`dmtrack.datasets.stream`) have
 until the source ends, ``max_frames`` is reached or the run is stopped. ``realtime=True`` runs the odometry on the
 newest frame a grabber thread has (a live source as fast as it delivers, a recorded sequence played at its
 timestamps) and drops the frames it had no time for.
+
+Compilation is not counted in a run's speed: before its first frame, a run calls :func:`warm_up`, which runs the
+odometry with the run's feature and configuration on a tiny in-memory sequence so that numba compiles its kernels
+(or loads them from its cache) there; ``compile_s`` in the metrics is that time, ``fps`` and ``wall_s`` start after
+it.
 """
 
 from __future__ import annotations
@@ -117,6 +122,8 @@ class RunResult:
         :func:`track` and :func:`run_to_directory` re-raise it once the finished frames are saved.
     dropped_frames : frames of a ``realtime`` run that the odometry skipped because a newer one had come.
     realtime : whether the run was a ``realtime`` one.
+    compile_s : seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
+        0 when this process had warmed up the feature and configuration already, or without warm-up).
     """
 
     trajectory: Trajectory
@@ -133,6 +140,7 @@ class RunResult:
     halted_by: BaseException | None = None
     dropped_frames: int = 0
     realtime: bool = False
+    compile_s: float = 0.0
 
 
 def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | Path | None) -> Sequence:
@@ -163,6 +171,7 @@ def track(
     r_l: float | None = None,
     progress: bool | None = False,
     realtime: bool = False,
+    warmup: bool = True,
 ) -> RunResult:
     """Track ``sequence`` with ``feature``.
 
@@ -184,6 +193,8 @@ def track(
         takes the newest one; frames it had no time for are dropped and counted (``dropped_frames``).  Which
         frames are dropped depends on the machine and its load, so realtime runs are **not** deterministic
         (without it, results are byte-identical run to run).
+    warmup : first compile or load the kernels (:func:`warm_up`; ``compile_s``), so that ``fps`` measures
+        tracking only; results are the same either way.
 
     Raises
     ------
@@ -192,7 +203,7 @@ def track(
     """
     result = _track(
         sequence, feature, config, start=start, max_frames=max_frames, seed=seed, sink=sink, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime,
+        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
     )
     _raise_halt([result])
     return result
@@ -233,6 +244,7 @@ def track_many(
     r_l: float | None = None,
     progress: bool | None = False,
     realtime: bool = False,
+    warmup: bool = True,
 ) -> list[RunResult]:
     """Track ``sequence`` with one feature and several odometry configurations in lockstep.
 
@@ -250,7 +262,7 @@ def track_many(
     """
     results = _track_many(
         sequence, feature, configs, start=start, max_frames=max_frames, sinks=sinks, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime,
+        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
     )
     _raise_halt(results)
     return results
@@ -290,11 +302,14 @@ class _Prefetched:
 
 
 class _Realtime:
-    """The newest frame of a :class:`~dmtrack.datasets.stream.FrameGrabber` each time the odometry is ready;
-    ``prepare`` (crop + feature) runs on the calling thread. Stops when the grabber ends or ``should_stop()``."""
+    """The newest frame of a :class:`~dmtrack.datasets.stream.FrameGrabber` (reading frames with ``read(i)``) each
+    time the odometry is ready; ``prepare`` (crop + feature) runs on the calling thread. Stops when the grabber ends
+    or ``should_stop()``."""
 
-    def __init__(self, seq: Sequence, start: int, stop: int | None, live: bool, prepare: Any, should_stop: Any):
-        self._grabber = FrameGrabber(seq.__getitem__, start, stop, None if live else seq.timestamps)
+    def __init__(
+        self, seq: Sequence, read: Any, start: int, stop: int | None, live: bool, prepare: Any, should_stop: Any
+    ) -> None:
+        self._grabber = FrameGrabber(read, start, stop, None if live else seq.timestamps)
         self._prepare = prepare
         self._should_stop = should_stop
 
@@ -334,6 +349,7 @@ def _track_many(
     r_l: float | None = None,
     progress: bool | None = False,
     realtime: bool = False,
+    warmup: bool = True,
 ) -> list[RunResult]:
     """:func:`track_many` without re-raising ``halted_by``; a live source is closed when the run ends."""
     if not configs:
@@ -344,7 +360,7 @@ def _track_many(
         raise InputError(f"{len(sinks)} sinks for {len(configs)} configurations")
     seq = _open(sequence, format, intrinsics)
     try:
-        return _track_sequence(seq, feature, configs, start, max_frames, sinks, r_l, progress, realtime)
+        return _track_sequence(seq, feature, configs, start, max_frames, sinks, r_l, progress, realtime, warmup)
     finally:
         live = live_source(seq)
         if live is not None:
@@ -361,6 +377,7 @@ def _track_sequence(
     r_l: float | None,
     progress: bool | None,
     realtime: bool,
+    warmup: bool,
 ) -> list[RunResult]:
     if seq.camera is None:
         raise InputError(
@@ -414,28 +431,41 @@ def _track_sequence(
         first[0] = False
         return frame.timestamp, image, fmap, t1 - t0, t2 - t1, depth
 
+    read_frame = getattr(seq, "read_frame", None)
+
+    def read(i: int) -> Any:
+        # the ground-truth depth is decoded only for init='groundtruth' (of the first frame, or any frame grabbed)
+        if read_frame is None:
+            return seq[i]
+        return read_frame(i, depth=init_depth and (realtime or i == start))
+
     def load(i: int) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
         # read + decode + crop + feature of frame i (on the prefetch thread, overlapping the odometry of the
         # previous frame)
         t0 = time.perf_counter()
-        frame = seq[i]
+        frame = read(i)
         return prepare(frame, t0)
 
     def prepare_grabbed(frame: Any, read_s: float) -> tuple[float, np.ndarray, Any, float, float, np.ndarray | None]:
         return prepare(frame, time.perf_counter() - read_s)  # read in read_s seconds by the grabber thread
 
-    t_io = t_feat = 0.0
-    t_start = time.perf_counter()
-    bar = _progress(None if stop is None else stop - start, seq.name, feat.name, progress)
+    t_io = t_feat = compile_s = 0.0
+    bar = None
     results: list[VOResult] = []
     halted_by: BaseException | None = None
     stops = _StopBetweenFrames().__enter__()
     frames: _Prefetched | _Realtime = (
-        _Realtime(seq, start, stop, live, prepare_grabbed, lambda: stops.pending is not None) if realtime
+        _Realtime(seq, read, start, stop, live, prepare_grabbed, lambda: stops.pending is not None) if realtime
         else _Prefetched(load, start, stop)
     )
+    t_start = time.perf_counter()
     try:
-        for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames:
+        if warmup:
+            compile_s = sum(warm_up(feat, c) for c in configs)
+        t_start = time.perf_counter()
+        bar = _progress(None if stop is None else stop - start, seq.name, feat.name, progress)
+        # a signal during the warm-up stops the run before its first frame
+        for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames if stops.pending is None else ():
             t_io += dt_io
             t_feat += dt_feat
             for vo in vos:
@@ -504,6 +534,7 @@ def _track_sequence(
             groundtruth=groundtruth,
             dropped_frames=int(frames.dropped),
             realtime=bool(realtime),
+            compile_s=compile_s,
         )
         result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
         out.append(result)
@@ -521,6 +552,75 @@ def _for_feature(config: VOConfig, feat: Any) -> VOConfig:
             if value is not None:
                 config = dataclasses.replace(config, **{key: float(value)})
     return config
+
+
+class _WarmupSequence:
+    """Ten small RGB frames of two textured planes, the near one in front of the far one, seen by a camera moving
+    sideways (the near plane moves faster: parallax), for :func:`warm_up`. 256×192 gives the threaded tracker
+    enough points and the motion a second keyframe, so that a run calls no kernel the warm-up did not."""
+
+    name = "warm-up"
+    format = "warm-up"
+
+    def __init__(self, n_frames: int = 10, width: int = 256, height: int = 192, near: int = 5, far: int = 2) -> None:
+        import cv2
+
+        from dmtrack.datasets.base import Frame
+
+        rng = np.random.default_rng(0)
+
+        def texture(h: int) -> np.ndarray:
+            noise = rng.uniform(0, 255, (h, width + near * n_frames, 3)).astype(np.float32)
+            return cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 1.5), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+
+        back, front = texture(height), texture(height // 2)
+        top, left = height // 4, width // 4
+        self._frames = []
+        for k in range(n_frames):
+            image = back[:, far * k : far * k + width].copy()
+            image[top : top + height // 2, left : width - left] = front[:, near * k + left : near * k + width - left]
+            self._frames.append(Frame(k, k / 30.0, image))
+        self.camera = PinholeCamera(0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2, width, height)
+        self.width, self.height = width, height
+        self.timestamps = np.arange(n_frames, dtype=np.float64) / 30.0
+        self.groundtruth = None
+        self.has_groundtruth = False
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def __getitem__(self, index: int) -> Any:
+        return self._frames[index]
+
+
+_WARMED: set[tuple[str, VOConfig, int]] = set()
+
+
+def warm_up(feature: Any, config: VOConfig | None = None, *, strict: bool = False) -> float:
+    """Run the odometry on a tiny in-memory sequence with ``feature`` (a name or a Feature) and ``config`` so that
+    numba's kernels are compiled, or loaded from numba's cache, *before* a timed run; return the seconds spent.
+
+    Once per process for a feature, a configuration (seed and init aside) and a thread count: 0 after that.
+    Failures are ignored (the real run reports them) unless ``strict``; an interrupt is raised. A Feature object is
+    used as it is (its options, its loaded weights): features keep no state from one image to the next.
+    """
+    import numba
+
+    t0 = time.perf_counter()
+    key = None
+    try:
+        feat = _feature(feature)
+        config = dataclasses.replace(_for_feature(config or VOConfig(), feat), seed=0, init="random")
+        key = (feat.name, config, numba.get_num_threads())
+        if key in _WARMED:
+            return 0.0
+        track(_WarmupSequence(), feat, config, progress=False, warmup=False)
+    except Exception:  # the real run raises the same error
+        if strict:
+            raise
+    if key is not None:
+        _WARMED.add(key)  # also after a failure: not tried again
+    return time.perf_counter() - t0
 
 
 def _progress(total: int | None, name: str, feature: str, enabled: bool | None):  # noqa: ANN202
@@ -568,7 +668,8 @@ def metrics_dict(
 ) -> dict[str, Any]:
     """The ``metrics.json`` contents (keys of conventions.md, plus more).
 
-    ``fps`` is frames processed per second of the whole loop (reading, features, tracking, mapping);
+    ``fps`` is frames processed per second of the whole loop (reading, features, tracking, mapping), and
+    ``compile_s`` the seconds before it spent compiling or loading the kernels (:func:`warm_up`);
     ``dropped_frames`` counts the frames a ``realtime`` run skipped (0 otherwise);
     ``*_ms`` are means per processed frame; ``feature_ms`` includes building the feature pyramid.
     RPE values are per unit of the ground truth's length (metres for every real dataset here; centimetres for
@@ -596,6 +697,7 @@ def metrics_dict(
         "io_ms": t["io"],
         "pyramid_ms": t["pyramid"],
         "wall_s": t["wall_s"],
+        "compile_s": float(result.compile_s),
         "keyframes": len(result.keyframes),
         "start": int(start),
         "width": camera.width,

@@ -9,6 +9,10 @@ A *sequence* is an ordered list of frames from one camera.  Frames are read lazi
 
 Readers deliver images at their native size; the odometry crops them to multiples of 16
 (:meth:`dmtrack.geometry.camera.PinholeCamera.crop_to_multiple`).
+
+A reader may also offer ``read_frame(index, depth=False)``: the frame without its ground-truth depth, which a run
+does not need (:class:`LoaderSequence` and every reader built on it do; :func:`dmtrack.pipeline.track` uses it when
+it is there).
 """
 
 from __future__ import annotations
@@ -185,6 +189,11 @@ class LoaderSequence:
         return int(self._indices.size)
 
     def __getitem__(self, index: int) -> Frame:
+        return self.read_frame(index)
+
+    def read_frame(self, index: int, depth: bool = True) -> Frame:
+        """Frame ``index`` (``seq[index]``); ``depth=False`` does not read its ground-truth depth (``Frame.depth``
+        is then ``None``): a run needs only the image, and decoding a depth map costs as much as the image."""
         n = len(self)
         if not -n <= index < n:
             raise IndexError(f"frame {index} out of range for a sequence of {n} frames")
@@ -199,9 +208,9 @@ class LoaderSequence:
         pose = None
         if self._all_poses is not None and np.isfinite(self._all_poses[src]).all():
             pose = self._all_poses[src].copy()
-        depth = None if self._load_depth is None else self._load_depth(src)
+        depth_map = None if self._load_depth is None or not depth else self._load_depth(src)
         path = None if self._paths is None else self._paths[src]
-        return Frame(index, float(self._all_timestamps[src]), image, pose, depth, path)
+        return Frame(index, float(self._all_timestamps[src]), image, pose, depth_map, path)
 
     def __iter__(self) -> Iterator[Frame]:
         for i in range(len(self)):

@@ -569,7 +569,12 @@ class UndistortedSequence:
         return len(self.base)
 
     def __getitem__(self, index: int) -> Frame:
-        f = self.base[index]
+        return self.read_frame(index)
+
+    def read_frame(self, index: int, depth: bool = True) -> Frame:
+        """Frame ``index``; ``depth=False`` does not read (nor undistort) its ground-truth depth."""
+        read = getattr(self.base, "read_frame", None)
+        f = self.base[index] if read is None else read(index, depth=depth)
         image = self.undistorter(f.image)
         depth = None if f.depth is None else self.undistorter(f.depth, interpolation=cv2.INTER_NEAREST)
         return Frame(f.index, f.timestamp, image, f.pose, depth, f.path)

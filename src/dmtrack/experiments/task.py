@@ -17,8 +17,9 @@ Warm-up
 -------
 The first run in a fresh worker loads (or, with a cold cache, compiles) the numba kernels, which adds seconds
 to that run's wall time; so that this never reaches the measured per-frame times, every worker first runs the
-odometry on a tiny in-memory sequence with the run's feature (:func:`warm_up`, once per feature and process;
-``warmup_s`` in ``run_info.json``).
+odometry on a tiny in-memory sequence with the run's feature (:func:`dmtrack.pipeline.warm_up`, once per feature,
+configuration and process; ``warmup_s`` in ``run_info.json``; the run itself then finds nothing left to warm up:
+``compile_s`` 0 in its metrics).
 """
 
 from __future__ import annotations
@@ -118,59 +119,12 @@ def limit_threads(threads: int | None) -> None:
 
 
 # ============================================================================================ warm-up
-class _WarmupSequence:
-    """A tiny in-memory sequence (blurred noise seen by a camera moving sideways) for :func:`warm_up`."""
-
-    name = "warm-up"
-    format = "warm-up"
-
-    def __init__(self, n_frames: int = 6, width: int = 128, height: int = 96) -> None:
-        import cv2
-        import numpy as np
-
-        from dmtrack.geometry.camera import PinholeCamera
-
-        rng = np.random.default_rng(0)
-        big = rng.uniform(0.0, 255.0, size=(height, width + 2 * n_frames)).astype(np.float32)
-        big = cv2.GaussianBlur(big, (0, 0), 1.5)
-        big = cv2.normalize(big, None, 0, 255, cv2.NORM_MINMAX)
-        self._images = [np.ascontiguousarray(big[:, 2 * k : 2 * k + width]).astype(np.uint8) for k in range(n_frames)]
-        self.camera = PinholeCamera(0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2, width, height)
-        self.width, self.height = width, height
-        self.timestamps = np.arange(n_frames, dtype=np.float64) / 30.0
-        self.groundtruth = None
-        self.has_groundtruth = False
-
-    def __len__(self) -> int:
-        return len(self._images)
-
-    def __getitem__(self, index: int) -> Any:
-        from dmtrack.datasets.base import Frame
-
-        return Frame(index, float(self.timestamps[index]), self._images[index])
-
-    def __iter__(self) -> Any:
-        return (self[i] for i in range(len(self)))
-
-
-_WARMED: set[str] = set()
-
-
 def warm_up(feature: str, config: Any = None) -> float:
-    """Run the odometry once on a tiny in-memory sequence with ``feature`` so that numba's kernels are
-    compiled or loaded from its cache *before* a timed run; returns the seconds spent (0 if this process
-    has warmed up ``feature`` already).  Failures are ignored: the real run reports them."""
-    if feature in _WARMED:
-        return 0.0
-    t0 = time.perf_counter()
-    try:
-        from dmtrack.pipeline import track
+    """:func:`dmtrack.pipeline.warm_up` (imported when called: importing this module must not import numba before
+    :func:`limit_threads` sized its pool)."""
+    from dmtrack.pipeline import warm_up as warm_up_kernels
 
-        track(_WarmupSequence(), feature, config, progress=False)
-    except Exception:  # noqa: BLE001 - the real run will raise and record the same problem
-        pass
-    _WARMED.add(feature)
-    return time.perf_counter() - t0
+    return warm_up_kernels(feature, config)
 
 
 # ============================================================================================ the record

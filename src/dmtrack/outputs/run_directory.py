@@ -4,14 +4,18 @@
 ``trajectory.txt``     TUM format, T_wc, one line per tracked frame with the dataset's timestamp. Written
                        line by line and flushed, so a killed run keeps every frame it finished.
 ``keyframes.txt``      the same for the keyframes (appended when each keyframe's depth map is final).
-``pointcloud.ply``     semi-dense points of all keyframes in the world frame, coloured by the image
-                       (written atomically when the run closes, also after a tracking loss or an interrupt).
+``pointcloud.ply``     semi-dense points of all keyframes in the world frame, coloured by the image. Each
+                       keyframe's points go to a temporary file as the keyframe comes (memory holds one
+                       keyframe's); ``pointcloud.ply`` appears, atomically, when the run closes, also after a
+                       tracking loss or an interrupt (:class:`~dmtrack.io.ply.PlyStream`).
 ``depth/``             one picture per keyframe: inverse depth over the dimmed image, negative inverse
                        depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically.
 ``metrics.json``       written by the caller (:func:`dmtrack.pipeline.run_to_directory`), not by the sink.
 =====================  =====================================================================================
 
-A file that cannot be written (disk full, read-only folder) raises :class:`~dmtrack.errors.OutputError` naming it.
+A file that cannot be written (disk full, read-only folder) raises :class:`~dmtrack.errors.OutputError` naming it;
+for the point cloud, :meth:`RunDirectorySink.close` raises it (the run goes on, as when the cloud was kept in memory
+and written at the end), after writing the keyframes before the failed one if it can.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import numpy as np
 
 from dmtrack.errors import OutputError
 from dmtrack.io.atomic import output_error, prepare_folder, remove_stale_temporaries
-from dmtrack.io.ply import write_ply
+from dmtrack.io.ply import PlyStream
 from dmtrack.io.trajectory import tum_line
 from dmtrack.odometry.sink import KeyframeSnapshot
 from dmtrack.viz.depth import inverse_depth_image, write_png
@@ -88,8 +92,8 @@ class RunDirectorySink:
         self._kfs = _LineFile(self.out_dir / "keyframes.txt")
         self._traj.write(TUM_HEADER)
         self._kfs.write(TUM_HEADER)
-        self._points: list[np.ndarray] = []
-        self._colours: list[np.ndarray] = []
+        self._cloud = PlyStream(self.out_dir / "pointcloud.ply") if pointcloud else None
+        self._cloud_error: OutputError | None = None  # the first keyframe whose points could not be written
         self.n_frames = 0
         self.n_keyframes = 0
         self.lost: list[tuple[int, str]] = []
@@ -110,10 +114,11 @@ class RunDirectorySink:
         snap = depthmap_snapshot
         self._kfs.write(tum_line(timestamp, T_wc))
         self.n_keyframes += 1
-        if self.pointcloud:
-            pts, cols = snap.points_world(self.max_point_var)
-            self._points.append(pts.astype(np.float32))
-            self._colours.append(cols)
+        if self._cloud is not None and self._cloud_error is None:
+            try:
+                self._cloud.append(*snap.points_world(self.max_point_var))
+            except OutputError as e:  # as for a cloud held in memory: the run goes on, close() reports it
+                self._cloud_error = e
         if self.depth_images and snap.image is not None:
             picture = inverse_depth_image(snap.idepth, snap.valid, snap.image)
             write_png(self.depth_dir / f"kf_{keyframe_id:04d}_frame_{frame_index:06d}.png", picture)
@@ -122,7 +127,8 @@ class RunDirectorySink:
         self.lost.append((frame_index, reason))
 
     def close(self) -> None:
-        """Close the line files, then write the point cloud (every step is tried; the first error is raised)."""
+        """Close the line files, then write the point cloud (every step is tried; the first error is raised — a
+        keyframe whose points could not be written counts as an error of the point cloud)."""
         if self._closed:
             return
         self._closed = True
@@ -132,11 +138,11 @@ class RunDirectorySink:
                 f.close()
             except OutputError as e:
                 errors.append(e)
-        if self.pointcloud:
-            pts = np.concatenate(self._points) if self._points else np.zeros((0, 3), np.float32)
-            cols = np.concatenate(self._colours) if self._colours else np.zeros((0, 3), np.uint8)
+        if self._cloud_error is not None:
+            errors.append(self._cloud_error)
+        if self._cloud is not None:
             try:
-                write_ply(self.out_dir / "pointcloud.ply", pts, cols)
+                self._cloud.close()  # the keyframes before a failed one, if it can
             except OutputError as e:
                 errors.append(e)
         if errors:
@@ -144,4 +150,5 @@ class RunDirectorySink:
 
     @property
     def n_points(self) -> int:
-        return int(sum(p.shape[0] for p in self._points))
+        """Points written to the point cloud so far (0 without one)."""
+        return 0 if self._cloud is None else self._cloud.n_points

@@ -298,3 +298,56 @@ def test_lsd_slam_schedule_map_lag_and_keyframe_cadence(seq, frames, lag, gap) -
     for index, snap_frame in used:
         current_kf = max(k for k in kfs if k < index)
         assert snap_frame == max(current_kf, index - 1 - lag), (index, snap_frame)
+
+
+@pytest.mark.parametrize("threads", [1, None])
+def test_overlapped_mapping_gives_identical_bytes(seq, frames, threads) -> None:
+    """Frame n mapped on the worker thread while frame n + 1 is tracked (``overlap``): the same poses, keyframes,
+    maps and sink calls as mapping in line, bit for bit; each frame's mapping time is filled in once it is done."""
+    n = 20
+    runs = []
+    for overlap in (False, True):
+        sink = MemorySink()
+        vo = VisualOdometry(CAMERA, None, sink, threads=threads, overlap=overlap)
+        assert vo.overlap is overlap
+        results = [vo.process(f.index, f.timestamp, f.image, grey(f.image)) for f in frames[:n]]
+        res = vo.finish()
+        assert vo._pool is None  # the worker is gone after finish()
+        mapped = [r for r in results if r.tracked and not r.is_keyframe]
+        assert mapped and all(r.mapping_ms > 0 for r in mapped)
+        runs.append((
+            res.poses.tobytes(),
+            [(k.frame_index, k.scale) for k in res.keyframes],
+            vo.depth_map.idepth.tobytes(),
+            vo.depth_map.idepth_var_smoothed.tobytes(),
+            [(i, ts, T.tobytes()) for i, ts, T in sink.frames],
+            [r.is_keyframe for r in results],
+        ))  # fmt: skip
+    assert sum(runs[0][5]) >= 2  # a keyframe switch happened
+    assert runs[1] == runs[0]
+    with pytest.raises(InputError, match="map_lag"):
+        VisualOdometry(CAMERA, VOConfig(map_lag=0), overlap=True)
+
+
+def test_overlapped_mapping_error_is_raised_not_lost(seq, frames) -> None:
+    """An exception in the mapping worker comes out of the next process() call (or finish())."""
+    vo = VisualOdometry(CAMERA, None, overlap=True)
+    for f in frames[:3]:
+        vo.process(f.index, f.timestamp, f.image, grey(f.image))
+    dm = vo.depth_map  # waits for frame 2's mapping
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("mapping failed on purpose")
+
+    dm.update = broken  # type: ignore[method-assign]
+    vo.process(frames[3].index, frames[3].timestamp, frames[3].image, grey(frames[3].image))
+    with pytest.raises(RuntimeError, match="on purpose"):
+        vo.process(frames[4].index, frames[4].timestamp, frames[4].image, grey(frames[4].image))
+    vo2 = VisualOdometry(CAMERA, None, overlap=True)
+    for f in frames[:3]:
+        vo2.process(f.index, f.timestamp, f.image, grey(f.image))
+    vo2.depth_map.update = broken  # type: ignore[method-assign]
+    vo2.process(frames[3].index, frames[3].timestamp, frames[3].image, grey(frames[3].image))
+    with pytest.raises(RuntimeError, match="on purpose"):
+        vo2.finish()
+    assert vo2._pool is None

@@ -40,11 +40,11 @@ Remaining differences, all deliberate:
   searches in both, not the same pixels), so about 1 % of a frame's observations differ pixel by pixel;
   statistically the two agree.
 
-Typical cost at 640×480 grey (7-Scenes, numba, one core): 30–40 ms per :meth:`DepthMap.update` (observe
-≈ 4 ms + ≈ 0.4 µs per stereo search, regularize ≈ 6.5 ms, fill holes ≈ 1 ms), ≈ 40 ms per
-:meth:`DepthMap.create_keyframe`. With ``parallel=True`` observe, fill holes and regularize run over
-interleaved row chunks on all numba threads (dynamic schedule); on two idle cores observe takes ≈ 0.4× and
-regularize ≈ 0.5× of the one-core time (``benchmarks/bench_vo.py``).
+Typical cost at 640×480 grey (7-Scenes, numba, one core, ``benchmarks/profile_mapping.py``): ≈ 13 ms per
+:meth:`DepthMap.update` (observe ≈ 9.5 ms, ≈ 0.23 µs per stereo search, regularize ≈ 2.6 ms, fill holes
+≈ 1 ms), ≈ 19 ms per :meth:`DepthMap.create_keyframe`. With ``parallel=True`` observe, fill holes and
+regularize run over interleaved row chunks on all numba threads (dynamic schedule); on two idle cores observe
+takes ≈ 0.5× and regularize ≈ 0.6× of the one-core time.
 """
 
 from __future__ import annotations
@@ -497,10 +497,13 @@ class DepthMap:
             return 1.0
         rho = n / s
         rho2 = rho * rho
-        self.idepth[v] = (self.idepth[v] * rho).astype(np.float32)
-        self.idepth_smoothed[v] = (self.idepth_smoothed[v] * rho).astype(np.float32)
-        self.idepth_var[v] = (self.idepth_var[v] * rho2).astype(np.float32)
-        self.idepth_var_smoothed[v] = (self.idepth_var_smoothed[v] * rho2).astype(np.float32)
+        # in place where valid, float32 × float32(ρ) as ``a[v] * rho`` computes it (a Python float is a weak
+        # scalar), without the gathered copies
+        r1, r2 = np.float32(rho), np.float32(rho2)
+        np.multiply(self.idepth, r1, out=self.idepth, where=v)
+        np.multiply(self.idepth_smoothed, r1, out=self.idepth_smoothed, where=v)
+        np.multiply(self.idepth_var, r2, out=self.idepth_var, where=v)
+        np.multiply(self.idepth_var_smoothed, r2, out=self.idepth_var_smoothed, where=v)
         return float(rho)
 
     # ------------------------------------------------------------------------------------------ outputs
@@ -522,8 +525,8 @@ class DepthMap:
         """:meth:`tracking_depth` and :attr:`mean_idepth` from one pass over the map (what ``setDepth`` gives the
         tracker and the keyframe test)."""
         m = self._tracking_mask()
-        d = np.where(m, self.idepth_smoothed, np.float32(-1.0)).astype(np.float32)
-        v = np.where(m, self.idepth_var_smoothed, np.float32(-1.0)).astype(np.float32)
+        d = np.where(m, self.idepth_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
+        v = np.where(m, self.idepth_var_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
         mean = float(np.mean(d[m], dtype=np.float64)) if m.any() else float("nan")
         return d, v, mean
 

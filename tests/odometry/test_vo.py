@@ -351,3 +351,23 @@ def test_overlapped_mapping_error_is_raised_not_lost(seq, frames) -> None:
     with pytest.raises(RuntimeError, match="on purpose"):
         vo2.finish()
     assert vo2._pool is None
+
+
+def test_keyframe_emitted_once_when_the_sink_raises(seq, frames) -> None:
+    """A sink that fails on a keyframe: the error comes out of process(), and finish() then emits the keyframe the
+    odometry had moved on to — every keyframe reaches the sink at most once."""
+
+    class Failing(MemorySink):
+        def on_keyframe(self, keyframe_id, *args) -> None:  # noqa: ANN001
+            super().on_keyframe(keyframe_id, *args)
+            if keyframe_id == 0:
+                raise OSError("disk full on purpose")
+
+    sink = Failing()
+    vo = VisualOdometry(CAMERA, VOConfig(keyframe=KeyframeConfig(threshold=0.0)), sink)
+    with pytest.raises(OSError, match="on purpose"):
+        for f in frames[:12]:
+            vo.process(f.index, f.timestamp, f.image, grey(f.image))
+    vo.finish()
+    ids = [k.keyframe_id for k in sink.keyframes]
+    assert ids == [0, 1]

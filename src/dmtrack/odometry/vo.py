@@ -540,7 +540,6 @@ class VisualOdometry:
         assert self._dm is not None and self._kf is not None
         old_dm, old_kf, old_id = self._dm, self._kf, self._kf_id
         new_dm = old_dm.create_keyframe(frame, res.T_fk, res.ref_pixel_was_good)  # finalises old_dm in place
-        self._emit_keyframe(old_id, old_kf, old_dm)
         rho = float(new_dm.scale_from_parent)
         self._S_wk = self._S_wk @ _sim3(_inv_se3(res.T_fk), rho)
         self._s_wk *= rho
@@ -554,6 +553,9 @@ class VisualOdometry:
                 self._kf_id, frame.index, frame.timestamp, _se3_part(self._S_wk, self._s_wk), self._s_wk, rho
             )
         )
+        # emitted once the odometry has moved on: if the sink raises, finish() emits the new keyframe, not this
+        # one a second time
+        self._emit_keyframe(old_id, old_kf, old_dm)
 
     def _take_snapshot(self, ordinal: int) -> None:
         """Record the current keyframe's map after creating it at the ``ordinal``-th processed frame (0-based);

@@ -15,6 +15,7 @@ from numba import prange
 
 from dmtrack.odometry._depth_common import (
     _JIT,
+    _JIT_INLINE,
     P_MIN_BLACKLIST,
     P_MIN_GRAD,
     P_VAL_SUM_CREATE,
@@ -31,6 +32,24 @@ DIFF_FAC_SMOOTHING = 1.0
 
 
 # ============================================================================== numba kernels
+@numba.njit(**_JIT_INLINE)
+def _reg_term(vr, di, vi, val, d0, v0, c, fac, sv, ss, si, so, sk):  # pragma: no cover - compiled
+    """One neighbour's float32 contribution to a pixel's regularisation sums (validity, Σ d/σ², Σ 1/σ², occluders,
+    consistent neighbours), branch-free: ``c`` is its distance term."""
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    diff = di - d0
+    incons = fac * diff * diff > vi + v0
+    use = vr & (not incons)
+    iv = one / (vi + c)
+    sv += val if use else zero
+    ss += di * iv if use else zero
+    si += iv if use else zero
+    so += one if (vr & incons & (di > d0)) else zero
+    sk += one if use else zero
+    return sv, ss, si, so, sk
+
+
 def _regularize_impl(
     valid,
     blacklisted,
@@ -54,7 +73,6 @@ def _regularize_impl(
     for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
         for x in range(w):
             valid_read[y, x] = valid[y, x]
-    one = np.float32(1.0)
     zero = np.float32(0.0)
     fac = np.float32(DIFF_FAC_SMOOTHING)
     for chunk in prange(ROW_CHUNKS):
@@ -93,71 +111,27 @@ def _regularize_impl(
                     si = acc_i[x]
                     so = n_occ[x]
                     sk = n_ok[x]
-                    # dx = -2
-                    vr = valid_read[yy, x - 2]
-                    di = idepth[yy, x - 2]
-                    vi = var[yy, x - 2]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + v0
-                    use = vr & (not incons)
-                    iv = one / (vi + c0)
-                    sv += validity[yy, x - 2] if use else zero
-                    ss += di * iv if use else zero
-                    si += iv if use else zero
-                    so += one if (vr & incons & (di > d0)) else zero
-                    sk += one if use else zero
-                    # dx = -1
-                    vr = valid_read[yy, x - 1]
-                    di = idepth[yy, x - 1]
-                    vi = var[yy, x - 1]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + v0
-                    use = vr & (not incons)
-                    iv = one / (vi + c1)
-                    sv += validity[yy, x - 1] if use else zero
-                    ss += di * iv if use else zero
-                    si += iv if use else zero
-                    so += one if (vr & incons & (di > d0)) else zero
-                    sk += one if use else zero
-                    # dx = 0
-                    vr = valid_read[yy, x]
-                    di = idepth[yy, x]
-                    vi = var[yy, x]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + v0
-                    use = vr & (not incons)
-                    iv = one / (vi + c2)
-                    sv += validity[yy, x] if use else zero
-                    ss += di * iv if use else zero
-                    si += iv if use else zero
-                    so += one if (vr & incons & (di > d0)) else zero
-                    sk += one if use else zero
-                    # dx = 1
-                    vr = valid_read[yy, x + 1]
-                    di = idepth[yy, x + 1]
-                    vi = var[yy, x + 1]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + v0
-                    use = vr & (not incons)
-                    iv = one / (vi + c3)
-                    sv += validity[yy, x + 1] if use else zero
-                    ss += di * iv if use else zero
-                    si += iv if use else zero
-                    so += one if (vr & incons & (di > d0)) else zero
-                    sk += one if use else zero
-                    # dx = 2
-                    vr = valid_read[yy, x + 2]
-                    di = idepth[yy, x + 2]
-                    vi = var[yy, x + 2]
-                    diff = di - d0
-                    incons = fac * diff * diff > vi + v0
-                    use = vr & (not incons)
-                    iv = one / (vi + c4)
-                    sv += validity[yy, x + 2] if use else zero
-                    ss += di * iv if use else zero
-                    si += iv if use else zero
-                    so += one if (vr & incons & (di > d0)) else zero
-                    sk += one if use else zero
+                    # dx = −2 … 2, in LSD-SLAM's order (one inlined term each: the loop over x stays vectorised)
+                    sv, ss, si, so, sk = _reg_term(
+                        valid_read[yy, x - 2], idepth[yy, x - 2], var[yy, x - 2], validity[yy, x - 2], d0, v0, c0, fac,
+                        sv, ss, si, so, sk,
+                    )  # fmt: skip
+                    sv, ss, si, so, sk = _reg_term(
+                        valid_read[yy, x - 1], idepth[yy, x - 1], var[yy, x - 1], validity[yy, x - 1], d0, v0, c1, fac,
+                        sv, ss, si, so, sk,
+                    )  # fmt: skip
+                    sv, ss, si, so, sk = _reg_term(
+                        valid_read[yy, x], idepth[yy, x], var[yy, x], validity[yy, x], d0, v0, c2, fac,
+                        sv, ss, si, so, sk,
+                    )  # fmt: skip
+                    sv, ss, si, so, sk = _reg_term(
+                        valid_read[yy, x + 1], idepth[yy, x + 1], var[yy, x + 1], validity[yy, x + 1], d0, v0, c3, fac,
+                        sv, ss, si, so, sk,
+                    )  # fmt: skip
+                    sv, ss, si, so, sk = _reg_term(
+                        valid_read[yy, x + 2], idepth[yy, x + 2], var[yy, x + 2], validity[yy, x + 2], d0, v0, c4, fac,
+                        sv, ss, si, so, sk,
+                    )  # fmt: skip
                     acc_v[x] = sv
                     acc_s[x] = ss
                     acc_i[x] = si

@@ -218,6 +218,12 @@ class _MapSnapshot:
     mean_idepth: float
     ref: TrackingReference | None = None
 
+    @classmethod
+    def of(cls, dm: DepthMap, frame: int) -> _MapSnapshot:
+        """The snapshot of ``dm`` as it is now, after the ``frame``-th processed frame."""
+        idepth, var, mean_idepth = dm.tracking_snapshot()
+        return cls(frame, idepth, var, dm.n_updates, mean_idepth)
+
 
 class VisualOdometry:
     """Deterministic single-process semi-dense VO over N-channel feature maps.
@@ -268,8 +274,8 @@ class VisualOdometry:
         if threads is not None and not 1 <= int(threads) <= numba.config.NUMBA_NUM_THREADS:
             raise InputError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS}, got {threads}")
         self.threads = None if threads is None else int(threads)
-        n_threads = self.threads if self.threads is not None else numba.get_num_threads()
         if parallel is None:
+            n_threads = self.threads if self.threads is not None else numba.get_num_threads()
             parallel = use_numba and n_threads > 1
         self.camera = camera
         self.config = config if config is not None else VOConfig()
@@ -460,7 +466,10 @@ class VisualOdometry:
         result = FrameResult(
             index, timestamp, T_wc, True, False, self._kf_id, None, res, pyramid_ms, tracking_ms, 0.0, reference_ms
         )
-        args = (self._dm, frame, T_fk, res.ref_pixel_was_good.copy(), res.initial_tracked_residual, ordinal)
+        good = res.ref_pixel_was_good
+        if self.overlap:
+            good = good.copy()  # the worker's own: nothing the calling thread does next can touch it
+        args = (self._dm, frame, T_fk, good, res.initial_tracked_residual, ordinal)
         if not self.overlap:
             self._apply_mapping(result, self._map(*args))
             return result
@@ -480,8 +489,7 @@ class VisualOdometry:
         frame, which reads only snapshots taken earlier."""
         t0 = time.perf_counter()
         dm.update(frame, T_fk, good, residual)
-        idepth, var, mean_idepth = dm.tracking_snapshot()
-        snap = _MapSnapshot(ordinal, idepth, var, dm.n_updates, mean_idepth)
+        snap = _MapSnapshot.of(dm, ordinal)
         return snap, 1e3 * (time.perf_counter() - t0)
 
     def _map_in_worker(self, n_threads: int, *args: object) -> tuple[_MapSnapshot, float]:
@@ -490,8 +498,7 @@ class VisualOdometry:
 
     def _apply_mapping(self, result: FrameResult, done: tuple[_MapSnapshot, float]) -> None:
         snap, mapping_ms = done
-        self._snaps.append(snap)
-        del self._snaps[: -(self.config.map_lag + 1)]
+        self._keep_snapshot(snap)
         result.mapping_ms = mapping_ms
         self._t_sum["mapping"] += mapping_ms
 
@@ -561,8 +568,11 @@ class VisualOdometry:
         """Record the current keyframe's map after creating it at the ``ordinal``-th processed frame (0-based);
         keep what a later frame may still use (mapped frames add theirs in :meth:`_apply_mapping`)."""
         assert self._dm is not None
-        idepth, var, mean_idepth = self._dm.tracking_snapshot()
-        self._snaps.append(_MapSnapshot(ordinal, idepth, var, self._dm.n_updates, mean_idepth))
+        self._keep_snapshot(_MapSnapshot.of(self._dm, ordinal))
+
+    def _keep_snapshot(self, snap: _MapSnapshot) -> None:
+        """Add ``snap``, the newest, and drop those no later frame can use."""
+        self._snaps.append(snap)
         del self._snaps[: -(self.config.map_lag + 1)]
 
     def _snapshot_for(self, ordinal: int) -> _MapSnapshot:

@@ -46,6 +46,9 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from profile_mapping import _load, load_images  # noqa: E402  (the same frames and load figures as the mapping profile)
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_SEQUENCE = REPO / "data" / "7scenes-redkitchen-0000-0299"
 
@@ -86,13 +89,6 @@ ROWS = (
     ("evaluations", True),
     ("iterations", True),
 )
-
-
-def _load() -> list[float]:
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except OSError:  # pragma: no cover - platform without getloadavg
-        return []
 
 
 class Profiler:
@@ -150,20 +146,6 @@ class Profiler:
         for mod, attr, fn in reversed(self._orig):
             setattr(mod, attr, fn)
         self._orig.clear()
-
-
-def load_images(sequence: str, frames: int) -> tuple[Any, list[tuple[float, np.ndarray]]]:
-    """(cropped camera, [(timestamp, cropped image)]) of the first ``frames`` frames, decoded once."""
-    from dmtrack.datasets import open_sequence
-    from dmtrack.geometry.camera import crop_image
-
-    seq = open_sequence(sequence)
-    camera, box = seq.camera.crop_to_multiple(16)
-    out = []
-    for i in range(min(frames, len(seq))):
-        fr = seq[i]
-        out.append((float(fr.timestamp), crop_image(fr.image, box)))
-    return camera, out
 
 
 def one_run(

@@ -42,3 +42,28 @@ def test_a_run_does_not_decode_the_depth_maps(damaged_depth: Path, undistorted: 
     assert frame.depth is None and frame.image.shape == (480, 640, 3) and frame.pose is not None
     result = track(damaged_depth, intrinsics=intrinsics, max_frames=N)  # a run never does
     assert result.tracked_frames == N
+
+
+@pytest.mark.parametrize(("channels", "ahead"), [(1, 2), (128, 0)], ids=["grey", "dense-SIFT-sized"])
+def test_frames_are_read_ahead_within_a_memory_budget(channels: int, ahead: int) -> None:
+    """The background reader keeps PREFETCH frames in flight while their feature maps fit PREFETCH_BYTES (grey), and
+    none for 640×480×128 float32 maps (157 MB each: dense SIFT would otherwise hold three more of them)."""
+    import numpy as np
+
+    from dmtrack import pipeline
+
+    def load(i: int) -> tuple:
+        return float(i), None, np.zeros((480, 640, channels), np.float32), 0.0, 0.0, None
+
+    frames = pipeline._Prefetched(load, 0, 8)
+    in_flight = []
+    try:
+        for i, item in frames:
+            assert item[0] == float(i)  # in order
+            in_flight.append(len(frames._pending))
+    finally:
+        frames.close()
+    assert len(in_flight) == 8 and frames.delivered == 8
+    assert in_flight[0] == 0  # the first frame alone: its size is not known before
+    assert in_flight[1:6] == [ahead] * 5
+    assert in_flight[-1] == 0

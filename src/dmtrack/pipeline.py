@@ -51,8 +51,11 @@ R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
 DEFAULT_R_L = 1.0 / 3.0
 #: First line of a run folder's ``groundtruth.txt``.
 GROUNDTRUTH_HEADER = "ground truth of the run's frames (camera-to-world, TUM format, the dataset's units)"
-#: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one).
+#: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one)...
 PREFETCH = 2
+#: ... while their feature maps take at most this many bytes: a 640×480 dense SIFT map is 157 MB, so its frames are
+#: read and converted in turn, on that thread (the order and the results are the same; only memory and speed differ).
+PREFETCH_BYTES = 64 << 20
 
 
 class _StopBetweenFrames:
@@ -276,6 +279,7 @@ class _Prefetched:
     def __init__(self, load: Any, start: int, stop: int | None) -> None:
         self._load = load
         self._start, self._stop = start, stop
+        self._ahead = PREFETCH  # frames in flight besides the next one, set from the first frame's feature size
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
         self._pending: deque[Future] = deque()
         self.delivered = 0
@@ -284,21 +288,34 @@ class _Prefetched:
     def __iter__(self) -> Any:
         nxt = i = self._start
         while self._stop is None or i < self._stop:
-            while (self._stop is None or nxt < self._stop) and len(self._pending) <= PREFETCH:
+            # none ahead until the first feature map's size is known, then as many as PREFETCH_BYTES holds
+            ahead = self._ahead if i > self._start else 0
+            while (self._stop is None or nxt < self._stop) and len(self._pending) <= ahead:
                 self._pending.append(self._pool.submit(self._load, nxt))
                 nxt += 1
             try:
                 item = self._pending.popleft().result()
             except EndOfStream:  # a live source ended
                 return
+            if i == self._start:
+                size = _feature_bytes(item[2])
+                self._ahead = min(PREFETCH, PREFETCH_BYTES // max(size, 1))
             self.delivered += 1
             yield i, item
+            item = None  # the odometry is done with frame i: its feature map goes before the next one is awaited
             i += 1
 
     def close(self) -> None:
         for fut in self._pending:
             fut.cancel()
         self._pool.shutdown(wait=True)
+
+
+def _feature_bytes(fmap: Any) -> int:
+    """Bytes of a prepared frame's feature map (one array, or one per pyramid level)."""
+    if isinstance(fmap, (list, tuple)):
+        return sum(int(getattr(f, "nbytes", 0)) for f in fmap)
+    return int(getattr(fmap, "nbytes", 0))
 
 
 class _Realtime:
@@ -471,6 +488,7 @@ def _track_sequence(
             for vo in vos:
                 if not vo.stopped:
                     vo.process(i, timestamp, image, fmap, depth)
+            image = fmap = depth = None  # not kept while the next frame is awaited (157 MB for dense SIFT)
             if bar is not None:
                 bar.update(i + 1 - start - bar.n)
                 bar.set_postfix_str(f"kf {vos[0].n_keyframes}", refresh=False)

@@ -289,6 +289,50 @@ def test_single_channel_build_is_the_three_dimensional_build_bit_for_bit():
         assert x.tobytes() == y.tobytes()
 
 
+@pytest.mark.parametrize("seeds", [(1, 2, 3), tuple(range(4, 30))], ids=["N=3", "N=26"])
+def test_observe_without_gradient_maps_is_bit_identical(seeds):
+    """N > 1: the observe kernel given no gradient maps forms each keyframe pixel's gradients itself (the depth map
+    keeps no (H, W, N) gradients): the same counters and states, byte for byte, as with the maps."""
+    from dmtrack.odometry._depth_update import observe_numba
+
+    cscale = 1.0 / len(seeds)
+    cam = _camera(96, 64)
+    kf, _ = _frame(0, cam, np.eye(4), seeds)
+    T_wc = _motion(4)
+    fr, _ = _frame(4, cam, T_wc, seeds)
+    dm = DepthMap()
+    dm.initialize_random(kf, seed=2)
+    dm.valid[np.random.default_rng(0).random(dm.valid.shape) < 0.3] = False  # creations too
+    lv = kf.levels[0]
+    geo = stereo_geometry(cam.fx, cam.fy, cam.cx, cam.cy, np.linalg.inv(T_wc), 0.2)
+    prm = make_params(DepthConfig())
+    good = np.random.default_rng(1).random((32, 48)) > 0.1
+    results = []
+    for gx, gy in ((lv.gx, lv.gy), (None, None)):
+        state = tuple(x.copy() for x in dm.state)
+        counts = observe_numba(state, lv.feat, gx, gy, lv.max_grad, fr.levels[0].feat, good, geo, prm, cscale, 4, 1.0)
+        results.append((counts, state))
+    (c_maps, s_maps), (c_fly, s_fly) = results
+    assert c_maps[4] > 50  # updated
+    assert c_maps.tobytes() == c_fly.tobytes()
+    for x, y in zip(s_maps, s_fly, strict=True):
+        assert x.tobytes() == y.tobytes()
+
+
+def test_multichannel_keyframe_keeps_no_gradient_maps():
+    """The depth map of an N > 1 keyframe reads only max_grad: the (H, W, N) gradients are never built."""
+    cam = _camera(64, 48)
+    kf, _ = _frame(0, cam, np.eye(4), (1, 2, 3))
+    fr, _ = _frame(5, cam, _motion(5), (1, 2, 3))
+    dm = DepthMap()
+    dm.initialize_random(kf, seed=1)
+    dm.update(fr, np.linalg.inv(_motion(5)))
+    dm.create_keyframe(fr, np.linalg.inv(_motion(5)))
+    assert dm.n_valid > 0
+    for frame in (kf, fr):
+        assert frame.levels[0]._gx is None and frame.levels[0]._gy is None
+
+
 # ================================================================================== random init
 def test_random_init_is_seeded_and_feature_independent():
     cam = _camera(64, 48)

@@ -14,6 +14,7 @@ from dmtrack.odometry.frame import (
     downsample_numpy,
     gradients,
     gradients_numpy,
+    max_gradient,
     pack,
     pack_numpy,
 )
@@ -37,6 +38,22 @@ def test_gradients_numba_equals_numpy(n: int) -> None:
     else:  # the kernel sums the N magnitudes in a vectorised order: equal up to float32 rounding
         np.testing.assert_allclose(mg, mg_r, rtol=1e-6)
         assert np.array_equal(mg == 0, mg_r == 0)
+
+
+@pytest.mark.parametrize("n", [1, 3, 8, 128])
+def test_max_gradient_is_that_of_gradients_bit_for_bit(n: int) -> None:
+    """max_grad without the gradient arrays (what a multichannel keyframe's depth map reads) has the bytes of the
+    one :func:`gradients` computes with them."""
+    f = _random_feat(24, 40, n, seed=10 + n)
+    f[5:9, 10:20] = 17.0  # flat patches: zero magnitudes and ties in the 3×3 maximum
+    a, b = max_gradient(f), gradients(f)[2]
+    assert a.dtype == np.float32 and a.shape == (24, 40)
+    assert a.tobytes() == b.tobytes()
+    cam = PinholeCamera(30.0, 30.0, 15.5, 7.5, 32, 16)
+    level = build_frame(0, 0.0, np.zeros((16, 32), np.uint8), f[:16, :32], cam, n_levels=1).levels[0]
+    assert level.max_grad.tobytes() == gradients(f[:16, :32])[2].tobytes()
+    assert (level._gx is None) == (n > 1)  # N > 1: no (h, w, N) gradients were kept for it
+    np.testing.assert_array_equal(level.gx, gradients(f[:16, :32])[0])  # still there on request
 
 
 @pytest.mark.parametrize("n", [1, 3, 8])

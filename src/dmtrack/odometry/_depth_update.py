@@ -55,6 +55,10 @@ from dmtrack.odometry._depth_common import (
     _variant,
 )
 from dmtrack.odometry._epipolar_stereo import _epl_check, _line_stereo, epl_check_reference, line_stereo_reference
+from dmtrack.odometry.frame import gradients
+
+#: ``kf_gx`` / ``kf_gy`` of the observe kernel when it forms the keyframe pixels' gradients itself (N > 1).
+_NO_GRADIENTS = np.empty(0, np.float32)
 
 #: ``DIFF_FAC_OBSERVE`` (1 in LSD-SLAM): factor of the squared difference in the consistency test of an update.
 DIFF_FAC_OBSERVE = 1.0
@@ -105,6 +109,18 @@ def _observe_rows(
     kfv = np.empty((5, nch), np.float64)
     ring = np.empty((6, nch), np.float64)
     st = np.empty((6, 7), np.float64)
+    # N > 1 without gradient maps (kf_gx.ndim == 1, see observe_numba): the keyframe pixel's own gradients, formed
+    # here per pixel with the float32 arithmetic of frame.gradients (the same bits as reading the maps)
+    on_the_fly = kf.ndim == 3 and kf_gx.ndim == 1
+    pgx = np.empty(nch if on_the_fly else 0, np.float32)
+    pgy = np.empty(nch if on_the_fly else 0, np.float32)
+    half = np.float32(0.5)
+    if kf_gx.ndim == 1:
+        gxa = pgx
+        gya = pgy
+    else:
+        gxa = kf_gx
+        gya = kf_gy
     for y in range(3 + chunk, h - 3, ROW_CHUNKS):
         for x in range(3, w - 3):
             has = valid[y, x]
@@ -123,7 +139,11 @@ def _observe_rows(
             if use_good and not good[y >> GOOD_LEVEL, x >> GOOD_LEVEL]:
                 counts[y, C_SKIP_NOT_GOOD] += 1
                 continue
-            ok, epxn, epyn = _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale)
+            if on_the_fly:
+                for c in range(nch):
+                    pgx[c] = half * (kf[y, x + 1, c] - kf[y, x - 1, c])
+                    pgy[c] = half * (kf[y + 1, x, c] - kf[y - 1, x, c])
+            ok, epxn, epyn = _epl_check(gxa, gya, x, y, geo, prm, cscale)
             if not ok:
                 counts[y, C_SKIP_EPL] += 1
                 continue
@@ -133,8 +153,8 @@ def _observe_rows(
                 err, rid, rvar, rlen = _line_stereo(
                     kf,
                     ref,
-                    kf_gx,
-                    kf_gy,
+                    gxa,
+                    gya,
                     float(x),
                     float(y),
                     epxn,
@@ -184,7 +204,7 @@ def _observe_rows(
                     hi = max_depth_id
                 counts[y, C_UPDATE_ATTEMPTED] += 1
                 err, rid, rvar, rlen = _line_stereo(
-                    kf, ref, kf_gx, kf_gy, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, kfv, ring, st
+                    kf, ref, gxa, gya, float(x), float(y), epxn, epyn, lo, ids, hi, geo, prm, cscale, kfv, ring, st
                 )
                 diff = rid - ids
                 if err == -1.0:
@@ -267,8 +287,8 @@ _observe_parallel = numba.njit(parallel=True, **_JIT)(_variant(_observe_impl, "_
 def observe_numba(
     state: tuple[np.ndarray, ...],
     kf: np.ndarray,
-    kf_gx: np.ndarray,
-    kf_gy: np.ndarray,
+    kf_gx: np.ndarray | None,
+    kf_gy: np.ndarray | None,
     kf_mg: np.ndarray,
     ref: np.ndarray,
     good: np.ndarray | None,
@@ -282,9 +302,16 @@ def observe_numba(
     """observeDepth over the keyframe (in place on ``state``); returns the (N_COUNTS,) int64 counters.
 
     ``state`` = (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s). Rows are independent,
-    so ``parallel=True`` (numba prange over rows) gives byte-identical results.
+    so ``parallel=True`` (numba prange over rows) gives byte-identical results. ``kf_gx``, ``kf_gy`` may be
+    ``None``: for N > 1 the kernel then forms each keyframe pixel's gradients from ``kf`` itself (the same bits,
+    without two (H, W, N) maps: 314 MB for 128-channel dense SIFT at 640×480).
     """
     h = state[0].shape[0]
+    if kf_gx is None or kf_gy is None:
+        if kf.shape[2] == 1:
+            kf_gx, kf_gy, _ = gradients(kf)
+        else:  # the kernel forms each keyframe pixel's gradients itself (see _observe_rows)
+            kf_gx = kf_gy = _NO_GRADIENTS
     if kf.shape[2] == 1:  # one channel: the (H, W) build, without channel loops (the same arithmetic)
         kf, kf_gx, kf_gy, ref = (a.reshape(a.shape[0], a.shape[1]) for a in (kf, kf_gx, kf_gy, ref))
     counts = np.zeros((h, N_COUNTS), np.int64)

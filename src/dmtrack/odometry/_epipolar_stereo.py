@@ -152,7 +152,10 @@ pin_cached(_window_cost, _kf_norms, _sample_stats)
 
 @numba.njit(**_JIT_LLVM_INLINE)
 def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - compiled
-    """``makeAndCheckEPL``: returns (ok, epxn, epyn) with the unit epipolar direction in the keyframe."""
+    """``makeAndCheckEPL``: returns (ok, epxn, epyn) with the unit epipolar direction in the keyframe.
+
+    ``kf_gx``, ``kf_gy``: the keyframe's gradient maps, (H, W) or (H, W, N), or for N > 1 the (N,) gradient
+    vectors of pixel (x, y) itself (the observe kernel forms them on the fly instead of keeping the maps)."""
     epx = -geo[G_FX] * geo[G_TINV] + geo[G_TINV + 2] * (x - geo[G_CX])
     epy = -geo[G_FY] * geo[G_TINV + 1] + geo[G_TINV + 2] * (y - geo[G_CY])
     if math.isnan(epx + epy):
@@ -166,6 +169,8 @@ def _epl_check(kf_gx, kf_gy, x, y, geo, prm, cscale):  # pragma: no cover - comp
         d = gx * epx + gy * epy
         dot2 = d * d
         g2 = gx * gx + gy * gy
+    elif kf_gx.ndim == 1:  # N > 1: the gradients of pixel (x, y) itself, (N,) vectors (see _observe_rows)
+        dot2, g2 = _epl_sums(kf_gx, kf_gy, epx, epy)
     elif kf_gx.shape[2] == 1:
         gx = 2.0 * kf_gx[y, x, 0]
         gy = 2.0 * kf_gy[y, x, 0]
@@ -189,7 +194,8 @@ def _line_stereo(
 ):  # pragma: no cover - compiled
     """LSD-SLAM ``doLineStereo`` for N channels.
 
-    ``kf``, ``ref``, ``kf_gx``, ``kf_gy`` are (H, W, N) float32 maps, or (H, W) for one channel: numba compiles a
+    ``kf``, ``ref``, ``kf_gx``, ``kf_gy`` are (H, W, N) float32 maps, or (H, W) for one channel (``kf_gx``,
+    ``kf_gy`` may also be the (N,) gradient vectors of pixel (u, v), see :func:`_epl_check`): numba compiles a
     build per dimensionality and prunes the other's branches (``ndim`` is a compile-time constant), so the
     single-channel build keeps every sample in a register. ``kfv`` (5, N) and ``ring`` (6, N) are float64 scratch
     arrays (keyframe samples, reference ring; unused by the (H, W) build), ``st`` a (6, 7) float64 one
@@ -518,6 +524,13 @@ def _line_stereo(
         gg += gxc * gxc + gyc * gyc
         d = gxc * epxn + gyc * epyn
         ge += d * d
+    elif kf_gx.ndim == 1:  # the gradients of pixel (u, v) as (N,) vectors (see _epl_check)
+        for c in range(nch):
+            gxc = kf_gx[c]
+            gyc = kf_gy[c]
+            gg += gxc * gxc + gyc * gyc
+            d = gxc * epxn + gyc * epyn
+            ge += d * d
     else:
         for c in range(nch):
             gxc = kf_gx[iv, iu, c]

@@ -330,8 +330,9 @@ class DepthMap:
         args = (
             self.state,
             lv.feat,
-            lv.gx,
-            lv.gy,
+            # N > 1 with numba: the kernel forms each pixel's gradients itself (no (H, W, N) maps kept)
+            None if self.use_numba and lv.feat.shape[2] > 1 else lv.gx,
+            None if self.use_numba and lv.feat.shape[2] > 1 else lv.gy,
             lv.max_grad,
             frame.levels[0].feat,
             good,

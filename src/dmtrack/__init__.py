@@ -12,6 +12,11 @@ The heavy modules (numba kernels, OpenCV) are imported on first use, so ``import
 
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 __version__ = "0.1.0"
@@ -32,3 +37,38 @@ def __getattr__(name: str) -> Any:
 
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'dmtrack' has no attribute {name!r}")
+
+
+def _numba_cache_fallback(folders: Sequence[Path] | None = None) -> None:
+    """numba caches the compiled kernels next to the package's sources, else in the user's cache folder; where it can
+    write to neither (a read-only installation and a read-only home), it refuses to import a kernel ("no locator
+    available"). Then this points ``NUMBA_CACHE_DIR`` at a private folder of the temporary directory instead.
+
+    Runs when ``dmtrack`` is imported (before any of its modules imports numba), so the command line and the Python
+    API both work from such an installation. ``folders``: the places to try (default: numba's two).
+    """
+    if os.environ.get("NUMBA_CACHE_DIR") or "numba" in sys.modules:
+        return  # the user's choice, or numba has read its configuration already
+    if folders is None:
+        home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        folders = (Path(__file__).resolve().parent / "odometry" / "__pycache__", Path(home) / "numba")
+    for folder in folders:
+        try:  # numba's own test of a cache folder
+            folder.mkdir(parents=True, exist_ok=True)
+            tempfile.TemporaryFile(dir=folder).close()
+            return
+        except OSError:
+            continue
+    # a private folder (cached kernels are machine code): this user's own, or else a new one for this process
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    folder = Path(tempfile.gettempdir()) / f"dmtrack-numba-cache-{uid}"
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        st = folder.stat()
+        private = uid is not None and st.st_uid == uid and not st.st_mode & 0o077 and not folder.is_symlink()
+    except OSError:
+        private = False
+    os.environ["NUMBA_CACHE_DIR"] = str(folder) if private else tempfile.mkdtemp(prefix="dmtrack-numba-cache-")
+
+
+_numba_cache_fallback()

@@ -541,42 +541,11 @@ def _terminate_as_interrupt() -> None:
             signal.signal(getattr(signal, name), handler)
 
 
-def _numba_cache_fallback() -> None:
-    """numba caches the compiled kernels next to the package's sources, else in the user's cache folder; where it can
-    write to neither (a read-only installation and a read-only home), it refuses to import a kernel ("no locator
-    available"). Then it caches them in a folder of the temporary directory instead (``NUMBA_CACHE_DIR``)."""
-    import os
-    import tempfile
-    from pathlib import Path
-
-    if os.environ.get("NUMBA_CACHE_DIR") or "numba" in sys.modules:
-        return
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    for folder in (Path(__file__).resolve().parent / "odometry" / "__pycache__", Path(home) / "numba"):
-        try:  # numba's own test of a cache folder
-            folder.mkdir(parents=True, exist_ok=True)
-            tempfile.TemporaryFile(dir=folder).close()
-            return
-        except OSError:
-            continue
-    # a private folder (cached kernels are machine code): this user's own, or else a new one for this process
-    uid = os.getuid() if hasattr(os, "getuid") else None
-    folder = Path(tempfile.gettempdir()) / f"dmtrack-numba-cache-{uid}"
-    try:
-        folder.mkdir(mode=0o700, exist_ok=True)
-        st = folder.stat()
-        private = uid is not None and st.st_uid == uid and not st.st_mode & 0o077 and not folder.is_symlink()
-    except OSError:
-        private = False
-    os.environ["NUMBA_CACHE_DIR"] = str(folder) if private else tempfile.mkdtemp(prefix="dmtrack-numba-cache-")
-
-
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     warnings.showwarning = _showwarning
     _terminate_as_interrupt()
-    _numba_cache_fallback()
     try:
         return int(args.func(args) or 0)
     except DmtrackError as e:

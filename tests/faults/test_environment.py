@@ -140,3 +140,48 @@ def test_read_only_output_folder(tmp_path: Path, capsys, read_only, leftover_tem
     assert code == 1 and str(out) in line and "Read-only file system" in line
     assert leftover_temporaries(out) == []
     fault_log.tried("dmtrack run --out", "read-only folder")
+
+
+_CACHE_SCRIPT = """
+import os, sys
+from pathlib import Path
+import dmtrack  # its own call found a writable folder (or NUMBA_CACHE_DIR was cleared): nothing set yet
+assert "NUMBA_CACHE_DIR" not in os.environ and "numba" not in sys.modules
+dmtrack._numba_cache_fallback([Path(p) for p in sys.argv[1:]])
+import numba
+assert os.path.realpath(numba.config.CACHE_DIR) == os.path.realpath(os.environ["NUMBA_CACHE_DIR"])
+@numba.njit(cache=True)
+def f(x):
+    return x + 1
+assert f(1) == 2
+print(os.environ["NUMBA_CACHE_DIR"])
+"""
+
+
+def test_numba_cache_falls_back_to_a_private_temporary_folder(tmp_path: Path, fault_log) -> None:
+    """A read-only installation with a read-only home (no folder numba can cache in): importing dmtrack points
+    numba at a private folder of the temporary directory, for the API as for the command line."""
+    import os
+    import stat
+    import subprocess
+    import sys
+    import tempfile
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder\n")
+    unwritable = [blocker / "odometry" / "__pycache__", blocker / "home-cache" / "numba"]  # mkdir fails under a file
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    env["TMPDIR"] = str(tmp_path / "tmp")
+    (tmp_path / "tmp").mkdir()
+    script = tmp_path / "script.py"  # a file: numba caches only functions whose source file it can locate
+    script.write_text(_CACHE_SCRIPT)
+    proc = subprocess.run([sys.executable, str(script), *map(str, unwritable)], capture_output=True, text=True,
+                          env=env, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    folder = Path(proc.stdout.strip().splitlines()[-1])
+    assert folder.parent == tmp_path / "tmp" and folder.name.startswith("dmtrack-numba-cache-")
+    if hasattr(os, "getuid"):
+        assert stat.S_IMODE(folder.stat().st_mode) == 0o700  # machine code: nobody else may write there
+    assert any(folder.rglob("*.nbi")), "numba did not cache in the fallback folder"
+    assert tempfile.gettempdir() != str(tmp_path / "tmp")  # the test's TMPDIR stayed in the subprocess
+    fault_log.tried("environment", "no writable numba cache folder (read-only installation and home)")

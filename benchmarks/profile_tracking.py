@@ -1,4 +1,4 @@
-"""Per-stage and per-level profile of the tracker and the frame pyramid (grey VO, 1 and 2 numba threads).
+"""Per-stage and per-level profile of the tracker and the frame pyramid (any feature, 1 and 2 numba threads).
 
 Usage::
 
@@ -66,6 +66,8 @@ WRAPS: tuple[tuple[str, str, str, Any], ...] = (
     ("dmtrack.odometry._tracker_residuals", "_eval_grey_parallel", "residual", ("shape", 4)),
     ("dmtrack.odometry._tracker_residuals", "_eval_multi", "residual", ("shape", 4)),
     ("dmtrack.odometry._tracker_residuals", "eval_pass_parallel", "residual", ("shape", 4)),
+    ("dmtrack.odometry._tracker_multi", "eval_multi", "residual", ("shape", 4)),  # 1 < N <= 32
+    ("dmtrack.odometry._tracker_multi", "eval_multi_threaded", "residual", ("shape", 4)),
     ("dmtrack.odometry.tracker", "warp_update", "normal_eq", "current"),
     ("dmtrack.odometry.tracker", "warp_update_parallel", "normal_eq", "current"),
     ("dmtrack.odometry.tracker", "solve_damped", "lm_step", "current"),
@@ -133,7 +135,10 @@ class Profiler:
 
         done = []
         for mod_name, attr, stage, rule in WRAPS:
-            mod = importlib.import_module(mod_name)
+            try:
+                mod = importlib.import_module(mod_name)
+            except ModuleNotFoundError:  # a version without that module
+                continue
             fn = getattr(mod, attr, None)
             if fn is None:
                 continue

@@ -10,37 +10,40 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from dmtrack.odometry._tracker_residuals import select
+
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def idepth_downsample(idepth: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
     """Inverse-variance-weighted 2×2 mean of the valid (var > 0) children; none valid → (−1, −1).
 
     ``idepth = Σ(d_i/σ_i²) / Σ(1/σ_i²)``, ``var = n / Σ(1/σ_i²)``. Inputs (h, w) float32, outputs
-    (h//2, w//2) float32.
+    (h//2, w//2) float32. Children in the order (0, 0), (0, 1), (1, 0), (1, 1), float64 sums from +0.0; an
+    invalid child adds +0.0 (computed, then masked with ``select``), which leaves a sum unchanged, so the row
+    loop vectorises and gives the bytes of skipping the invalid children.
     """
     h2 = idepth.shape[0] // 2
     w2 = idepth.shape[1] // 2
     out_d = np.empty((h2, w2), np.float32)
     out_v = np.empty((h2, w2), np.float32)
     for y in range(h2):
+        d0, d1 = idepth[2 * y], idepth[2 * y + 1]
+        v0, v1 = var[2 * y], var[2 * y + 1]
+        od, ov = out_d[y], out_v[y]
         for x in range(w2):
             isum = 0.0
             dsum = 0.0
             num = 0
-            for dy in range(2):
-                for dx in range(2):
-                    v = var[2 * y + dy, 2 * x + dx]
-                    if v > 0:
-                        iv = 1.0 / v
-                        isum += iv
-                        dsum += iv * idepth[2 * y + dy, 2 * x + dx]
-                        num += 1
-            if num > 0:
-                out_d[y, x] = dsum / isum
-                out_v[y, x] = num / isum
-            else:
-                out_d[y, x] = -1.0
-                out_v[y, x] = -1.0
+            for vr, dr, k in ((v0, d0, 2 * x), (v0, d0, 2 * x + 1), (v1, d1, 2 * x), (v1, d1, 2 * x + 1)):
+                v = vr[k]
+                ok = v > 0
+                iv = 1.0 / v
+                isum += select(ok, iv, 0.0)
+                dsum += select(ok, iv * dr[k], 0.0)
+                num += ok
+            has = num > 0
+            od[x] = select(has, dsum / isum, -1.0)
+            ov[x] = select(has, num / isum, -1.0)
     return out_d, out_v
 
 
@@ -80,30 +83,37 @@ def make_points(
     nch = feat.shape[2]
     n = 0
     for y in range(1, h - 1):
+        dr, vr = idepth[y], var[y]
         for x in range(1, w - 1):
-            if var[y, x] > 0 and idepth[y, x] != 0:
-                n += 1
+            n += (vr[x] > 0) & (dr[x] != 0)
     pts = np.empty((n, 3), np.float32)
     vals = np.empty((n, nch), np.float32)
     vrs = np.empty(n, np.float32)
     idx = np.empty(n, np.int32)
+    xs = np.empty(w, np.int64)
     fxi = 1.0 / fx
     fyi = 1.0 / fy
     cxi = -cx / fx
     cyi = -cy / fy
     k = 0
     for y in range(1, h - 1):
-        for x in range(1, w - 1):
-            if var[y, x] > 0 and idepth[y, x] != 0:
-                depth = 1.0 / idepth[y, x]
-                pts[k, 0] = depth * (fxi * x + cxi)
-                pts[k, 1] = depth * (fyi * y + cyi)
-                pts[k, 2] = depth
-                for c in range(nch):
-                    vals[k, c] = feat[y, x, c]
-                vrs[k] = var[y, x]
-                idx[k] = y * w + x
-                k += 1
+        dr, vr, fr = idepth[y], var[y], feat[y]
+        m = 0
+        for x in range(1, w - 1):  # the row's kept columns, without a branch per pixel
+            xs[m] = x
+            m += (vr[x] > 0) & (dr[x] != 0)
+        py = fyi * y + cyi
+        for j in range(m):
+            x = xs[j]
+            depth = 1.0 / dr[x]
+            pts[k + j, 0] = depth * (fxi * x + cxi)
+            pts[k + j, 1] = depth * py
+            pts[k + j, 2] = depth
+            vrs[k + j] = vr[x]
+            idx[k + j] = y * w + x
+            for c in range(nch):
+                vals[k + j, c] = fr[x, c]
+        k += m
     return pts, vals, vrs, idx
 
 

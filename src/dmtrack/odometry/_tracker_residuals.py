@@ -595,6 +595,9 @@ def _eval_multi(*args):  # type: ignore[no-untyped-def]
 def eval_kernels(n_channels: int) -> tuple:
     """(serial, threaded) compiled evaluation for ``n_channels`` channels, each called like :func:`eval_pass`.
 
+    The tracker takes its kernels from :func:`dmtrack.odometry._tracker_multi.tracker_eval_kernels` (the chunked
+    multichannel kernel for 1 < N ≤ 32, bit-identical to these).
+
     Grey has its own vectorised kernel (IEEE arithmetic: its serial and ``prange`` builds agree bit for bit);
     the others run the multichannel kernel, the serial one on a single thread. Only the kernel a run uses is
     compiled.

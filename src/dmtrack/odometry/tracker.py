@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.odometry._tracker_multi import tracker_eval_kernels
 from dmtrack.odometry._tracker_normal_equations import (
     se3_exp,
     solve_damped,
@@ -47,7 +48,6 @@ from dmtrack.odometry._tracker_residuals import (
     BUF_COLS,
     P_A,
     P_B,
-    eval_kernels,
     eval_params,
     eval_pass_numpy,
 )
@@ -290,7 +290,7 @@ class Tracker:
         """(evaluation, normal-equation) functions for a level with ``n_points`` points of ``n_channels``."""
         if not self.use_numba:
             return eval_pass_numpy, warp_update_numpy
-        serial, threaded = eval_kernels(n_channels)
+        serial, threaded = tracker_eval_kernels(n_channels)
         if self.parallel and n_points >= self.parallel_min_points:
             return threaded, warp_update_parallel
         return serial, warp_update

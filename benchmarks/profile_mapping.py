@@ -100,12 +100,18 @@ def state_digest(dm: Any) -> str:
 
 
 def _config(feat: Any) -> Any:
+    """The configuration ``dmtrack run`` uses for ``feat``: the defaults completed by the pipeline (Gray-A's affine
+    brightness, the feature's measured energy/information channel counts of the multichannel cost rule)."""
     from dmtrack.odometry.config import VOConfig
 
     config = VOConfig()
-    if getattr(feat, "affine_brightness", False):
-        config = config.with_overrides("tracker.affine=true")
-    return config
+    try:
+        from dmtrack.pipeline import _for_feature
+    except ImportError:  # an older tree
+        if getattr(feat, "affine_brightness", False):
+            config = config.with_overrides("tracker.affine=true")
+        return config
+    return _for_feature(config, feat)
 
 
 class Frames:

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from profile_mapping import _load, load_images  # noqa: E402  (the same frames and load figures as the mapping profile)
+from profile_mapping import _config, _load, load_images  # noqa: E402  (the same frames and load figures as the mapping profile)
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_SEQUENCE = REPO / "data" / "7scenes-redkitchen-0000-0299"
@@ -162,13 +162,10 @@ def one_run(
     import numba
 
     from dmtrack.features import get_feature
-    from dmtrack.odometry.config import VOConfig
     from dmtrack.odometry.vo import VisualOdometry
 
     feat = get_feature(feature_name)
-    config = VOConfig()
-    if getattr(feat, "affine_brightness", False):
-        config = config.with_overrides("tracker.affine=true")
+    config = _config(feat)  # as `dmtrack run` completes it for the feature
     kwargs: dict[str, Any] = {"threads": threads}
     if "overlap" in inspect.signature(VisualOdometry).parameters:
         kwargs["overlap"] = False  # mapping on the calling thread: stage timers see tracking alone

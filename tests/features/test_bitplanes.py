@@ -93,3 +93,19 @@ def test_colour_input_uses_grey() -> None:
     rgb = rng.integers(0, 256, (12, 14, 3), dtype=np.uint8)
     f = get_feature("bitplanes", sigma0=0.0, scale=1.0)
     np.testing.assert_array_equal(f.compute(rgb), _census_reference(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32, np.float64, np.int16])
+def test_census_planes_kernel_gives_the_bytes_of_census_bits(dtype) -> None:
+    """The one-pass numba kernel the feature uses has the bytes of ``census_bits × scale`` (float32), ties included."""
+    from dmtrack.features.bitplanes import census_bits, census_planes
+
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 6, (37, 52)).astype(dtype)  # few levels: many ties (≥ counts them as set)
+    if dtype == np.float32:
+        img = img + rng.random((37, 52)).astype(np.float32) * np.float32(0.5)
+    for value in (1.0, 9.77, 0.3):
+        expected = census_bits(img).astype(np.float32) * np.float32(value)
+        got = census_planes(img, value)
+        assert got.dtype == np.float32 and got.shape == (37, 52, 8)
+        assert got.tobytes() == expected.tobytes()

@@ -17,6 +17,7 @@ Without pre-smoothing the map is invariant to any strictly increasing intensity 
 from __future__ import annotations
 
 import cv2
+import numba
 import numpy as np
 
 from dmtrack.features.base import Feature
@@ -50,6 +51,41 @@ def census_bits(image: np.ndarray) -> np.ndarray:
     for b, (dy, dx) in enumerate(CENSUS_OFFSETS):
         bits[1:-1, 1:-1, b] = image[1 + dy : h - 1 + dy, 1 + dx : w - 1 + dx] >= c
     return bits
+
+
+@numba.njit(cache=True, nogil=True)
+def _census_planes_kernel(img: np.ndarray, value: np.float32, out: np.ndarray) -> None:  # pragma: no cover
+    """Every pixel of ``out`` (h, w, 8): ``value`` where bit b of :func:`census_bits` is set, else 0."""
+    h, w = img.shape
+    zero = np.float32(0.0)
+    for y in range(h):
+        for x in range(w):
+            if y == 0 or y == h - 1 or x == 0 or x == w - 1:
+                for b in range(8):
+                    out[y, x, b] = zero
+                continue
+            c = img[y, x]
+            out[y, x, 0] = value if img[y - 1, x - 1] >= c else zero
+            out[y, x, 1] = value if img[y - 1, x] >= c else zero
+            out[y, x, 2] = value if img[y - 1, x + 1] >= c else zero
+            out[y, x, 3] = value if img[y, x - 1] >= c else zero
+            out[y, x, 4] = value if img[y, x + 1] >= c else zero
+            out[y, x, 5] = value if img[y + 1, x - 1] >= c else zero
+            out[y, x, 6] = value if img[y + 1, x] >= c else zero
+            out[y, x, 7] = value if img[y + 1, x + 1] >= c else zero
+
+
+def census_planes(image: np.ndarray, value: float = 1.0) -> np.ndarray:
+    """``census_bits(image) × value`` as ``(H, W, 8)`` float32 in one numba pass (the same values: a set bit is
+    ``float32(value)``, a clear one 0)."""
+    img = np.ascontiguousarray(image)
+    if img.ndim != 2:
+        raise ValueError(f"census_planes needs an (H, W) image, got shape {img.shape}")
+    if img.dtype not in (np.uint8, np.float32, np.float64):
+        img = img.astype(np.float64)  # exact for the integer types: the same comparisons
+    out = np.empty(img.shape + (8,), np.float32)
+    _census_planes_kernel(img, np.float32(value), out)
+    return out
 
 
 def census_code(image: np.ndarray) -> np.ndarray:
@@ -88,9 +124,7 @@ class BitPlanesFeature(Feature):
         img = image
         if self.sigma0 > 0:
             img = cv2.GaussianBlur(img, (3, 3), self.sigma0, sigmaY=self.sigma0)
-        out = census_bits(img).astype(np.float32)
-        if gain != 1.0:
-            out *= np.float32(gain)
+        out = census_planes(img, gain)  # census_bits(img) × gain, in one pass
         if self.sigma1 > 0:
             out = cv2.GaussianBlur(out, (5, 5), self.sigma1, sigmaY=self.sigma1)
             if out.ndim == 2:  # pragma: no cover - OpenCV keeps 8 channels, defensive

@@ -1008,3 +1008,25 @@ def test_update_variance_modes():
     assert c_r["inconsistent"] == 0 and n_r > 2 * n_s and e_r < 0.02  # measured 933 fused, error 1.3 %
     with pytest.raises(InputError, match="update_variance"):
         DepthConfig(update_variance="median")
+
+
+def test_tracking_select_is_the_numpy_expression_bit_for_bit():
+    """The one-pass kernel behind tracking_snapshot gives the bytes of the numpy mask / where / mean it replaced,
+    including values at the float32-rounded threshold (NumPy 2 compares float32 with a Python float in float32)."""
+    from dmtrack.odometry._depth_common import tracking_select
+
+    rng = np.random.default_rng(5)
+    valid = rng.random((48, 64)) < 0.4
+    ids = (rng.random((48, 64)) * 2 - 0.3).astype(np.float32)
+    ids[::7, ::5] = np.float32(-0.05)  # exactly the float32 threshold: selected
+    ids[1::9, ::3] = np.nextafter(np.float32(-0.05), np.float32(-1))  # just below: not selected
+    ids[2, :5] = np.nan
+    var = rng.random((48, 64)).astype(np.float32)
+    d, v, mean = tracking_select(valid, ids, var, -0.05)
+    m = valid & (ids >= -0.05)
+    assert d.tobytes() == np.where(m, ids, np.float32(-1.0)).astype(np.float32).tobytes()
+    assert v.tobytes() == np.where(m, var, np.float32(-1.0)).astype(np.float32).tobytes()
+    assert mean == float(np.mean(ids[m], dtype=np.float64))
+    assert (ids == np.float32(-0.05))[m].sum() > 10  # the tie case was exercised
+    _, _, none = tracking_select(np.zeros_like(valid), ids, var, -0.05)
+    assert np.isnan(none)

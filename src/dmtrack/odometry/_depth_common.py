@@ -318,6 +318,41 @@ def _sample1(img, x, y):  # pragma: no cover - compiled
 
 
 # ============================================================================== numpy helpers
+@numba.njit(cache=True, nogil=True)
+def _tracking_select(valid, ids, var, th, d, v, sel):  # pragma: no cover - compiled
+    """One pass of :func:`tracking_select`: ``d``/``v`` = ``ids``/``var`` where valid and ``ids`` ≥ ``th``, else −1;
+    the selected ``ids`` in row-major order into ``sel``; returns how many."""
+    k = 0
+    minus1 = np.float32(-1.0)
+    for y in range(valid.shape[0]):
+        for x in range(valid.shape[1]):
+            z = ids[y, x]
+            if valid[y, x] and z >= th:
+                d[y, x] = z
+                v[y, x] = var[y, x]
+                sel[k] = z
+                k += 1
+            else:
+                d[y, x] = minus1
+                v[y, x] = minus1
+    return k
+
+
+def tracking_select(
+    valid: np.ndarray, ids: np.ndarray, var: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The tracker's depth (LSD-SLAM ``Frame::setDepth``) in one pass: (d, v, mean) with d, v = ``ids``, ``var``
+    (float32 maps) where ``valid`` and ``ids`` ≥ ``threshold`` and −1 elsewhere, and the float64 mean of the
+    selected ``ids`` (NaN if none). The bytes of the numpy expression ``m = valid & (ids >= threshold)``,
+    ``np.where(m, ids, −1)``, ``np.mean(ids[m], dtype=float64)`` (NumPy ≥ 2 compares a float32 array with a Python
+    float in float32, so the threshold is rounded to float32 here too)."""
+    d = np.empty_like(ids)
+    v = np.empty_like(var)
+    sel = np.empty(ids.size, ids.dtype)
+    k = _tracking_select(valid, ids, var, ids.dtype.type(threshold), d, v, sel)
+    return d, v, (float(np.mean(sel[:k], dtype=np.float64)) if k else float("nan"))
+
+
 def empty_state(shape: tuple[int, int]) -> tuple[np.ndarray, ...]:
     """A fresh all-invalid state tuple (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s)."""
     h, w = shape

@@ -63,6 +63,7 @@ from dmtrack.odometry._depth_common import (
     empty_state,
     make_params,
     stereo_geometry,
+    tracking_select,
 )
 from dmtrack.odometry._depth_propagate import propagate_numba, propagate_reference
 from dmtrack.odometry._depth_regularize import (
@@ -525,11 +526,14 @@ class DepthMap:
     def tracking_snapshot(self) -> tuple[np.ndarray, np.ndarray, float]:
         """:meth:`tracking_depth` and :attr:`mean_idepth` from one pass over the map (what ``setDepth`` gives the
         tracker and the keyframe test)."""
-        m = self._tracking_mask()
-        d = np.where(m, self.idepth_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
-        v = np.where(m, self.idepth_var_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
-        mean = float(np.mean(d[m], dtype=np.float64)) if m.any() else float("nan")
-        return d, v, mean
+        if not self.use_numba:
+            m = self._tracking_mask()
+            d = np.where(m, self.idepth_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
+            v = np.where(m, self.idepth_var_smoothed, np.float32(-1.0)).astype(np.float32, copy=False)
+            mean = float(np.mean(d[m], dtype=np.float64)) if m.any() else float("nan")
+            return d, v, mean
+        th = self.config.min_tracking_idepth
+        return tracking_select(self.valid, self.idepth_smoothed, self.idepth_var_smoothed, th)
 
     @property
     def mean_idepth(self) -> float:

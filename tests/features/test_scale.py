@@ -198,24 +198,43 @@ class _Copies(Feature):
 
 def test_channel_statistics_of_grey_and_of_copies() -> None:
     imgs = _images(2, 96, 128)
-    grey = measure_channel_statistics("gray", imgs)
+    grey = measure_channel_statistics("gray", imgs, pixels="all")
     assert grey.energy_channels == pytest.approx(1.0, rel=1e-12)
     assert grey.info_channels == pytest.approx(1.0, rel=2e-3)  # the ridge only
     assert grey.noise_var == pytest.approx(grey.grey_noise_var) and grey.noise_channels == pytest.approx(1.0)
     # three copies: three times the gradient energy, the information of one grey image
-    three = measure_channel_statistics(_Copies(3), imgs)
+    three = measure_channel_statistics(_Copies(3), imgs, pixels="all")
     assert three.energy_channels == pytest.approx(3.0, rel=1e-12)
     assert three.info_channels == pytest.approx(1.0, rel=0.01)
     assert three.noise_channels == pytest.approx(1.0, rel=1e-6)
     # scaling the feature by s: N_E × s², κ ÷ s²
-    two = measure_channel_statistics(_Copies(3, scale=2.0), imgs)
+    two = measure_channel_statistics(_Copies(3, scale=2.0), imgs, pixels="all")
     assert two.energy_channels == pytest.approx(12.0, rel=1e-9)
     assert two.info_channels == pytest.approx(three.info_channels / 4.0, rel=1e-6)
 
 
+def test_semi_dense_channel_statistics() -> None:
+    """On the semi-dense pixels only: grey and copies of grey keep their exact counts (same pixels, same
+    gradients); Bit-Planes' census bits are stable at the edges the odometry uses, so its gradient energy per
+    selected pixel differs from the all-pixel average, and an unknown pixel set is refused."""
+    imgs = _images(2, 96, 128)
+    grey = measure_channel_statistics("gray", imgs, pixels="semi-dense")
+    assert grey.energy_channels == pytest.approx(1.0, rel=1e-12)
+    assert grey.info_channels == pytest.approx(1.0, rel=2e-3)
+    three = measure_channel_statistics(_Copies(3), imgs, pixels="semi-dense")
+    assert three.energy_channels == pytest.approx(3.0, rel=1e-12)
+    assert three.info_channels == pytest.approx(1.0, rel=0.01)
+    assert three.n_samples == grey.n_samples < measure_channel_statistics("gray", imgs, pixels="all").n_samples
+    bp_all = measure_channel_statistics("bitplanes", imgs, pixels="all")
+    bp_sd = measure_channel_statistics("bitplanes", imgs, pixels="semi-dense")
+    assert bp_sd.n_samples < bp_all.n_samples and bp_sd.energy_channels != pytest.approx(bp_all.energy_channels)
+    with pytest.raises(InputError, match="pixels"):
+        measure_channel_statistics("gray", imgs, pixels="edges")
+
+
 def test_rgb_channels_carry_independent_noise() -> None:
     """Independent noise per colour channel: κ = N σ_g²/σ_c² ≈ 3 · (0.299² + 0.587² + 0.114²) / scale² ≈ 1.5."""
-    rgb = measure_channel_statistics("rgb", _images(2, 96, 128))
+    rgb = measure_channel_statistics("rgb", _images(2, 96, 128), pixels="all")
     assert rgb.noise_channels == pytest.approx(3.0, rel=0.02)
     w2 = 0.299**2 + 0.587**2 + 0.114**2
     assert rgb.info_channels == pytest.approx(3.0 * w2 / get_feature("rgb").scale ** 2, rel=0.05)

@@ -714,7 +714,7 @@ register(
     description="dense SIFT at every pixel, single scale, no orientation (SIFT flow style, 4x4 cells x 8 bins)",
 )
 register(  # scale, N_E and κ measured like default_scales.json's on its 20 sample frames (weights/TRACKNET.md)
-    "tracknet", "dmtrack.features.tracknet:TrackNetFeature", channels=8, scale=108.4974, energy_channels=10.366,
-    info_channels=1.358,
+    "tracknet", "dmtrack.features.tracknet:TrackNetFeature", channels=8, scale=108.4974, energy_channels=9.49,
+    info_channels=1.045,
     description="small CNN trained through the tracker's alignment (preliminary weights: weights/TRACKNET.md)",
 )

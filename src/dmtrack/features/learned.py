@@ -22,6 +22,10 @@ Default scales: ``alexnet`` 1.23 and ``siamese`` 347.5 are the paper's values (i
 they cannot be recalibrated here); ``tfeat`` and ``disk`` were calibrated with
 :func:`dmtrack.features.scale.compute_default_scales` on the same 20 sample frames as ``default_scales.json``
 (target 130091.6 semi-dense pixels per frame, achieved 130091.4 and 130091.6); ``alexnet64`` is uncalibrated (1).
+``tfeat`` and ``disk`` also carry their channel counts N_E and κ for ``channel_cost="balanced"``, measured on the
+same frames with ``python -m dmtrack.features.scale --channels tfeat,disk FRAMES`` (docs/multichannel-cost.md):
+tfeat 31.516 and 7.819, disk 24.032 and 107.321 (semi-dense pixels). The other learned features have none (the channel
+mean is used).
 """
 
 from __future__ import annotations
@@ -59,6 +63,8 @@ _ENTRIES = (
         factory="dmtrack.features.tfeat:TFeatFeature",
         channels=128,
         scale=29.3193,  # calibrated like default_scales.json (20 sample frames 0, 15, ..., 285; minUseGrad 5)
+        energy_channels=31.516,  # N_E and κ at that scale, same frames, semi-dense pixels (measure_channel_statistics)
+        info_channels=7.819,
         description="TFeat (Liberty) descriptor of the 32x32 patch at every pixel (dense, shipped weights), 128-D",
     ),
     dict(
@@ -66,6 +72,8 @@ _ENTRIES = (
         factory="dmtrack.features.disk:DiskFeature",
         channels=128,
         scale=8.3247,  # calibrated like default_scales.json (20 sample frames 0, 15, ..., 285; minUseGrad 5)
+        energy_channels=24.032,  # N_E and κ at that scale, same frames, semi-dense pixels (measure_channel_statistics)
+        info_channels=107.321,
         needs_colour=True,
         needs_torch=True,
         description="DISK U-Net dense descriptors at full resolution (shipped 'depth' weights), 128-D",

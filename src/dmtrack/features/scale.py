@@ -319,6 +319,8 @@ def measure_channel_statistics(
     ridge: float = 1e-3,
     stride: int = 7,
     border: int = 8,
+    pixels: str = "semi-dense",
+    min_use_grad: float = 5.0,
 ) -> ChannelStatistics:
     """N_E and κ: the channel counts of the odometry's ``channel_cost="balanced"`` (docs/multichannel-cost.md).
 
@@ -344,7 +346,16 @@ def measure_channel_statistics(
     feature (both directions, every ``stride``-th pixel). κ = 1 for grey by construction and for any feature
     that is one grey image repeated; κ = N for N channels of independent noise and equal information each.
     κ scales as 1/scale² (information is compared with gradients in feature units).
+
+    ``pixels`` chooses where the expectations are taken. ``"all"``: every interior pixel. ``"semi-dense"``:
+    only the pixels the odometry maps and tracks — for the feature, those whose gradient measure
+    (:func:`channel_mean_gradient`, the one its gates use) exceeds ``min_use_grad``; for the grey reference
+    (σ_g², E[|∇I|²]), the grey image's own such pixels. The thresholds the two counts rescale are only ever
+    applied there, and a feature's noise and gradient energy there can differ from the image average (a census
+    bit flips under noise in flat regions, hardly ever at an edge).
     """
+    if pixels not in ("all", "semi-dense"):
+        raise InputError(f"pixels must be 'all' or 'semi-dense', not {pixels!r}")
     from dmtrack.features.base import get_feature
 
     feat = as_feature(feature)
@@ -360,21 +371,28 @@ def measure_channel_statistics(
     energy = grey_energy = 0.0
     for img in iter_images(images):
         noisy = np.clip(np.rint(img.astype(np.float64) + rng.normal(0.0, sigma, img.shape)), 0, 255).astype(np.uint8)
-        clean = feat.compute(img).astype(np.float64)
-        d = (feat.compute(noisy).astype(np.float64) - clean)[b:-b, b:-b].reshape(-1, n)
+        clean_map = feat.compute(img)
+        grey_map = grey.compute(img)
+        if pixels == "semi-dense":
+            sel = (channel_mean_gradient(clean_map) > min_use_grad)[b:-b, b:-b].ravel()
+            sel_g = (channel_mean_gradient(grey_map) > min_use_grad)[b:-b, b:-b].ravel()
+        else:
+            sel = sel_g = slice(None)
+        clean = clean_map.astype(np.float64)
+        d = (feat.compute(noisy).astype(np.float64) - clean)[b:-b, b:-b].reshape(-1, n)[sel]
         cov += d.T @ d
         mean += d.sum(axis=0)
         count += d.shape[0]
-        grey_clean = grey.compute(img).astype(np.float64)
+        grey_clean = grey_map.astype(np.float64)
         dg = grey.compute(noisy).astype(np.float64) - grey_clean
-        grey_d.append(dg[b:-b, b:-b].ravel())
-        gx = 0.5 * (clean[b:-b, b + 1 : -b + 1] - clean[b:-b, b - 1 : -b - 1])
-        gy = 0.5 * (clean[b + 1 : -b + 1, b:-b] - clean[b - 1 : -b - 1, b:-b])
-        g_parts += [gx.reshape(-1, n)[::stride], gy.reshape(-1, n)[::stride]]
+        grey_d.append(dg[b:-b, b:-b].ravel()[sel_g])
+        gx = 0.5 * (clean[b:-b, b + 1 : -b + 1] - clean[b:-b, b - 1 : -b - 1]).reshape(-1, n)[sel]
+        gy = 0.5 * (clean[b + 1 : -b + 1, b:-b] - clean[b - 1 : -b - 1, b:-b]).reshape(-1, n)[sel]
+        g_parts += [gx[::stride], gy[::stride]]
         energy += float(np.mean(np.sum(gx * gx + gy * gy, axis=-1)))
         gi = grey_clean[..., 0]
-        gix = 0.5 * (gi[b:-b, b + 1 : -b + 1] - gi[b:-b, b - 1 : -b - 1])
-        giy = 0.5 * (gi[b + 1 : -b + 1, b:-b] - gi[b - 1 : -b - 1, b:-b])
+        gix = 0.5 * (gi[b:-b, b + 1 : -b + 1] - gi[b:-b, b - 1 : -b - 1]).ravel()[sel_g]
+        giy = 0.5 * (gi[b + 1 : -b + 1, b:-b] - gi[b - 1 : -b - 1, b:-b]).ravel()[sel_g]
         grey_energy += float(np.mean(gix * gix + giy * giy))
     if count == 0:
         raise InputError("measure_channel_statistics needs at least one image")
@@ -397,14 +415,16 @@ def measure_channel_statistics(
 
 
 def compute_channel_statistics(
-    image_paths: Sequence[str | Path], names: Sequence[str] = ("rgb", "lab", "bitplanes", "dsift")
+    image_paths: Sequence[str | Path],
+    names: Sequence[str] = ("rgb", "lab", "bitplanes", "dsift"),
+    pixels: str = "semi-dense",
 ) -> dict[str, dict[str, float]]:
     """:func:`measure_channel_statistics` of several features (each at its default scale) on the same images:
     ``{name: {"energy_channels", "info_channels", "noise_var", "grey_noise_var", "noise_channels"}}``."""
     images = [read_image(p) for p in image_paths]
     out: dict[str, dict[str, float]] = {}
     for name in names:
-        cal = measure_channel_statistics(name, images)
+        cal = measure_channel_statistics(name, images, pixels=pixels)
         out[name] = {
             "energy_channels": round(cal.energy_channels, 3),
             "info_channels": round(cal.info_channels, 3),
@@ -420,11 +440,16 @@ def _main() -> None:  # pragma: no cover - maintenance entry point (python -m dm
 
     args = sys.argv[1:]
     if args[:1] == ["--channels"]:
-        # python -m dmtrack.features.scale --channels rgb,lab,... FRAMES...: prints N_E and κ per feature
+        # python -m dmtrack.features.scale --channels rgb,lab,... [--pixels all|semi-dense] FRAMES...:
+        # prints N_E and κ per feature
+        pixels = "semi-dense"
+        if len(args) > 3 and args[2] == "--pixels":
+            pixels = args[3]
+            args = args[:2] + args[4:]
         if len(args) < 3:
-            print("usage: python -m dmtrack.features.scale --channels NAMES IMAGE...", file=sys.stderr)
+            print("usage: python -m dmtrack.features.scale --channels NAMES [--pixels P] IMAGE...", file=sys.stderr)
             raise SystemExit(2)
-        print(json.dumps(compute_channel_statistics(args[2:], args[1].split(",")), indent=2))
+        print(json.dumps(compute_channel_statistics(args[2:], args[1].split(","), pixels=pixels), indent=2))
         return
     if not args:
         print("usage: python -m dmtrack.features.scale [--channels NAMES] IMAGE...", file=sys.stderr)

@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/channel_cost_ablation.py --out DIR [--features rgb,lab,bitplanes,dsift]
         [--sequences 7scenes,tsukuba,kitti] [--seeds 0-2] [--variant NAME=KEY=VALUE[;KEY=VALUE...] ...]
-        [--max-frames N] [--jobs 2] [--data ../shared/data]
+        [--max-frames N] [--jobs 2] [--data ../shared/data] [--table-only]
 
 Default variants: the three values of ``channel_cost`` (``sum`` = the paper's literal squared L2 norm,
 ``mean``, ``balanced`` = the default rule, docs/multichannel-cost.md). One job per (sequence, feature) runs
@@ -68,6 +68,7 @@ def _job(job: tuple) -> list[dict]:
                 "tracked": m["tracked_frames"],
                 "total": m["total_frames"],
                 "lost_at": m["lost_at"],
+                "lost_reason": m.get("lost_reason"),
                 "keyframes": m["keyframes"],
                 "info_channels": m.get("info_channels"),
                 **{k: m.get(k) for k in METRICS},
@@ -89,7 +90,7 @@ def _fmt(vals: list[float | None], digits: int = 3) -> str:
 
 
 def write_tables(out: Path, rows: list[dict], seeds: list[int]) -> None:
-    cols = list(rows[0].keys())
+    cols = list(dict.fromkeys(k for r in rows for k in r))  # rows from older runs may lack later columns
     with open(out / "ablation.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=cols)
         w.writeheader()
@@ -137,6 +138,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-frames", type=int)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    ap.add_argument(
+        "--table-only",
+        action="store_true",
+        help="run nothing: write the tables from every finished (sequence, feature) in DIR/rows/ that has all the "
+        "variants and seeds asked for (e.g. when some features were run on only some sequences)",
+    )
     a = ap.parse_args(argv)
     from dmtrack.io.bench_layout import parse_seeds
 
@@ -153,7 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     for seq_key in a.sequences.split(","):
         folder, opts, r_l, _unit = SEQUENCES[seq_key]
         path = a.data / folder
-        if not path.exists():
+        if a.table_only:
+            path = Path(".")
+        elif not path.exists():
             print(f"skipping {seq_key}: {path} not found", file=sys.stderr)
             continue
         for feature in a.features.split(","):
@@ -163,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
                 if {(r["variant"], r["seed"]) for r in done} >= {(v, s) for v in variants for s in seeds}:
                     rows += [r for r in done if r["variant"] in variants and r["seed"] in seeds]
                     continue
-            jobs.append((seq_key, str(path), opts, r_l, feature, variants, seeds, a.max_frames, rows_file))
+            if not a.table_only:
+                jobs.append((seq_key, str(path), opts, r_l, feature, variants, seeds, a.max_frames, rows_file))
     # longest jobs first (7-Scenes has the most frames, dsift/tfeat/disk the most channels)
     cost = {"7scenes": 700, "tsukuba": 150, "kitti": 75}
     jobs.sort(key=lambda j: -cost.get(j[0], 100) * (128 if j[4] in ("dsift", "tfeat", "disk") else 8))

@@ -230,6 +230,11 @@ def test_semi_dense_channel_statistics() -> None:
     assert bp_sd.n_samples < bp_all.n_samples and bp_sd.energy_channels != pytest.approx(bp_all.energy_channels)
     with pytest.raises(InputError, match="pixels"):
         measure_channel_statistics("gray", imgs, pixels="edges")
+    flat = np.full((48, 64, 3), 90, np.uint8)
+    with_flat = measure_channel_statistics("gray", [flat, *imgs], pixels="semi-dense")  # the flat image is skipped
+    assert with_flat.energy_channels == pytest.approx(1.0, rel=1e-12) and with_flat.n_samples == grey.n_samples
+    with pytest.raises(InputError, match="semi-dense pixels"):
+        measure_channel_statistics("bitplanes", [flat], pixels="semi-dense")
 
 
 def test_rgb_channels_carry_independent_noise() -> None:

@@ -376,6 +376,8 @@ def measure_channel_statistics(
         if pixels == "semi-dense":
             sel = (channel_mean_gradient(clean_map) > min_use_grad)[b:-b, b:-b].ravel()
             sel_g = (channel_mean_gradient(grey_map) > min_use_grad)[b:-b, b:-b].ravel()
+            if not (sel.any() and sel_g.any()):
+                continue  # a flat image has no semi-dense pixel to measure (for the feature or for grey)
         else:
             sel = sel_g = slice(None)
         clean = clean_map.astype(np.float64)
@@ -395,7 +397,10 @@ def measure_channel_statistics(
         giy = 0.5 * (gi[b + 1 : -b + 1, b:-b] - gi[b - 1 : -b - 1, b:-b]).ravel()[sel_g]
         grey_energy += float(np.mean(gix * gix + giy * giy))
     if count == 0:
-        raise InputError("measure_channel_statistics needs at least one image")
+        raise InputError(
+            "measure_channel_statistics needs at least one image"
+            + (" with semi-dense pixels (gradient measure > min_use_grad)" if pixels == "semi-dense" else "")
+        )
     mean /= count
     C = cov / count - np.outer(mean, mean)
     g = np.concatenate(g_parts)

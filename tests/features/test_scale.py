@@ -215,8 +215,8 @@ def test_channel_statistics_of_grey_and_of_copies() -> None:
 
 def test_semi_dense_channel_statistics() -> None:
     """On the semi-dense pixels only: grey and copies of grey keep their exact counts (same pixels, same
-    gradients); Bit-Planes' census bits are stable at the edges the odometry uses, so its gradient energy per
-    selected pixel differs from the all-pixel average, and an unknown pixel set is refused."""
+    gradients); Bit-Planes' bounded bits carry another gradient energy at the selected pixels than on average; an
+    image without semi-dense pixels is skipped, and an unknown pixel set is refused."""
     imgs = _images(2, 96, 128)
     grey = measure_channel_statistics("gray", imgs, pixels="semi-dense")
     assert grey.energy_channels == pytest.approx(1.0, rel=1e-12)

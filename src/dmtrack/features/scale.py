@@ -351,8 +351,8 @@ def measure_channel_statistics(
     only the pixels the odometry maps and tracks — for the feature, those whose gradient measure
     (:func:`channel_mean_gradient`, the one its gates use) exceeds ``min_use_grad``; for the grey reference
     (σ_g², E[|∇I|²]), the grey image's own such pixels. The thresholds the two counts rescale are only ever
-    applied there, and a feature's noise and gradient energy there can differ from the image average (a census
-    bit flips under noise in flat regions, hardly ever at an edge).
+    applied there, and a feature's gradient energy and noise there can differ from the image average (Bit-Planes'
+    bounded bits: 0.82× grey's gradient energy at the semi-dense pixels, 1.35× over the whole image).
     """
     if pixels not in ("all", "semi-dense"):
         raise InputError(f"pixels must be 'all' or 'semi-dense', not {pixels!r}")

@@ -160,9 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     for seq_key in a.sequences.split(","):
         folder, opts, r_l, _unit = SEQUENCES[seq_key]
         path = a.data / folder
-        if a.table_only:
-            path = Path(".")
-        elif not path.exists():
+        if not a.table_only and not path.exists():
             print(f"skipping {seq_key}: {path} not found", file=sys.stderr)
             continue
         for feature in a.features.split(","):

@@ -29,7 +29,7 @@ def test_same_seed_gives_byte_identical_weights(tmp_path) -> None:
     assert wa != wc  # the seed matters (so the equality above is not vacuous)
     with np.load(tmp_path / "a" / "tracknet.npz") as z:
         meta = json.loads(str(z["meta"]))
-    assert meta["steps"] == 3 and meta["seed"] == 5 and meta["preliminary"] is True
+    assert meta["steps"] == 3 and meta["seed"] == 5
     # the log: one row per step, finite losses, and the training actually moved the weights
     rows = list(csv.DictReader((tmp_path / "a" / "train_log.csv").open()))
     assert [int(r["step"]) for r in rows] == [1, 2, 3]
@@ -49,10 +49,28 @@ def test_same_seed_gives_byte_identical_weights(tmp_path) -> None:
 
 
 def test_bad_options_are_input_errors(tmp_path) -> None:
-    for bad in (dict(data="7scenes"), dict(data="kitti"), dict(channels=0), dict(minutes=0.0), dict(crop=(100, 100))):
+    bad_options = (dict(data="7scenes"), dict(data="kitti"), dict(channels=0), dict(minutes=0.0), dict(crop=(100, 100)),
+                   dict(lr_schedule="step"), dict(lr_schedule="cosine", steps=None))
+    for bad in bad_options:
         with pytest.raises(InputError):
             train(tmp_path / "x", TrainOptions(**{**SMALL, **bad}))
     assert not (tmp_path / "x").exists()
+
+
+def test_cosine_schedule_runs_from_lr_to_its_final_fraction(tmp_path) -> None:
+    from dmtrack.training.train import learning_rate
+
+    opts = TrainOptions(steps=100, lr=1e-3, lr_schedule="cosine", lr_final=0.05)
+    rates = [learning_rate(opts, s) for s in range(101)]
+    assert rates[0] == pytest.approx(1e-3) and rates[50] == pytest.approx(0.525e-3)
+    assert rates[100] == pytest.approx(5e-5)
+    assert all(a > b for a, b in zip(rates[:-1], rates[1:], strict=True))
+    assert learning_rate(TrainOptions(steps=100), 70) == 1e-3  # constant is the default
+    cosine = TrainOptions(seed=5, lr_schedule="cosine", **SMALL)
+    train(tmp_path / "c", cosine)
+    rows = list(csv.DictReader((tmp_path / "c" / "train_log.csv").open()))
+    assert [float(r["lr"]) for r in rows] == pytest.approx([learning_rate(cosine, s) for s in range(3)])
+    assert float(rows[0]["lr"]) > float(rows[2]["lr"])
 
 
 def test_cli_parser() -> None:
@@ -60,6 +78,7 @@ def test_cli_parser() -> None:
     sub = parser.add_subparsers(dest="command")
     add_train_parser(sub)
     args = parser.parse_args(["train-feature", "--out", "o", "--minutes", "1.5", "--channels", "4", "--seed", "2"])
+    assert args.lr_schedule == "constant"
     got = (args.out, args.minutes, args.channels, args.seed, args.data, args.threads)
     assert got == ("o", 1.5, 4, 2, "synthetic", 1)
     assert args.func.__name__ == "cmd_train_feature"

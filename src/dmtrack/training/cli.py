@@ -31,6 +31,7 @@ def cmd_train_feature(args: argparse.Namespace) -> int:
         channels=args.channels,
         data=args.data,
         threads=args.threads,
+        lr_schedule=args.lr_schedule,
     )
 
     def say(msg: str) -> None:
@@ -73,6 +74,8 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--channels", type=positive_int, default=8, metavar="K", help="output channels K (default 8)")
     p.add_argument("--data", choices=("synthetic", "7scenes", "both"), default="synthetic",
                    help="training data (default synthetic; 7scenes and both are not implemented yet)")
+    p.add_argument("--lr-schedule", choices=("constant", "cosine"), default="constant",
+                   help="learning rate: constant 1e-3 (default), or cosine from 1e-3 to 5e-5 over --steps")
     p.add_argument("--threads", type=positive_int, default=1, metavar="N",
                    help="torch and numba threads (default 1: faster than 2 when other jobs share the cores)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

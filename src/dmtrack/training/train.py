@@ -68,6 +68,15 @@ from dmtrack.training.alignment import AlignParams, lm_step, pack
 from dmtrack.training.model import TrackNet, export_npz
 
 DATA_CHOICES = ("synthetic", "7scenes", "both")
+LR_SCHEDULES = ("constant", "cosine")
+
+
+def learning_rate(opts: TrainOptions, step: int) -> float:
+    """Adam's rate for step ``step`` (0-based) under ``opts.lr_schedule``."""
+    if opts.lr_schedule == "constant" or not opts.steps:
+        return opts.lr
+    t = min(step / opts.steps, 1.0)
+    return opts.lr * (opts.lr_final + (1.0 - opts.lr_final) * 0.5 * (1.0 + math.cos(math.pi * t)))
 
 
 @dataclass(frozen=True)
@@ -98,6 +107,11 @@ class TrainOptions:
         Pairs per step.
     lr : float
         Adam's learning rate.
+    lr_schedule : str
+        ``"constant"``, or ``"cosine"``: the rate falls from ``lr`` to ``lr_final · lr`` along half a cosine over
+        ``steps`` (which must then be given).
+    lr_final : float
+        Final fraction of ``lr`` of the cosine schedule.
     crop : tuple of int
         (width, height) of the random crop of the 640×480 synthetic frames.
     levels, iterations
@@ -140,6 +154,8 @@ class TrainOptions:
     calibration_images: int = 8
     batch: int = 2
     lr: float = 1e-3
+    lr_schedule: str = "constant"
+    lr_final: float = 0.05
     crop: tuple[int, int] = (320, 240)
     levels: tuple[int, ...] = (3, 2, 1)
     iterations: tuple[int, ...] = (3, 3, 3)
@@ -166,6 +182,10 @@ class TrainOptions:
                 f"--data {self.data}: training on 7-Scenes is not implemented yet (its depth images are not "
                 "registered to the colour camera); use --data synthetic"
             )
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise InputError(f"--lr-schedule must be one of {', '.join(LR_SCHEDULES)}, not {self.lr_schedule!r}")
+        if self.lr_schedule == "cosine" and self.steps is None:
+            raise InputError("--lr-schedule cosine needs --steps N: the schedule runs over a known number of steps")
         if not 1 <= self.channels <= 64:
             raise InputError(f"--channels must be in 1..64, got {self.channels}")
         if not (self.minutes > 0 and math.isfinite(self.minutes)):
@@ -496,7 +516,8 @@ class TrainResult:
     files: dict[str, str] = field(default_factory=dict)
 
 
-LOG_COLUMNS = ("step", "seconds", "loss", "scale_term", "default_scale", "init_px", "final_px", "grad_norm", "skipped")
+LOG_COLUMNS = ("step", "seconds", "lr", "loss", "scale_term", "default_scale", "init_px", "final_px", "grad_norm",
+               "skipped")  # fmt: skip
 
 
 def _checkpoint(net: TrackNet, optim: torch.optim.Optimizer, step: int, out: Path, meta: dict[str, Any]) -> None:
@@ -546,8 +567,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
     scale = match_gain(net, calib, gain)
 
     def meta() -> dict[str, Any]:
-        return {"seed": opts.seed, "data": opts.data, "gain": gain, "options": asdict(opts),
-                "preliminary": True}  # fmt: skip
+        return {"seed": opts.seed, "data": opts.data, "gain": gain, "options": asdict(opts)}
 
     def net_features(img: np.ndarray) -> torch.Tensor:
         return net(to_tensor(img))[0] * gain
@@ -594,12 +614,15 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
             loss.backward()
             gnorm = float(torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0))
             if math.isfinite(gnorm):
+                for group in optim.param_groups:
+                    group["lr"] = learning_rate(opts, step)
                 optim.step()
         step += 1
         rows.append(
             {
                 "step": step,
                 "seconds": round(time.perf_counter() - t_loop, 3),
+                "lr": learning_rate(opts, step - 1),
                 "loss": float(loss.detach()) if loss is not None else float("nan"),
                 "scale_term": float(np.mean(scale_terms)),
                 "default_scale": scale,

@@ -699,11 +699,12 @@ register(
 )
 register(
     "rgb", "dmtrack.features.colour:RgbFeature", channels=3, needs_colour=True,
-    description="R, G, B channels 0..255",
+    description="R, G, B channels 0..255, chroma low-passed (Gaussian 2 px; chroma_sigma=0: plain)",
 )
 register(
     "lab", "dmtrack.features.colour:LabFeature", channels=3, needs_colour=True,
-    description="CIE L*a*b* (sRGB, D65) in OpenCV's 8-bit ranges: 2.55·L*, a*+128, b*+128 (float)",
+    description="CIE L*a*b* (sRGB, D65) in OpenCV's 8-bit ranges: 2.55·L*, a*+128, b*+128 (float), a*/b* low-passed "
+    "(Gaussian 2 px; chroma_sigma=0: plain)",
 )
 register(
     "bitplanes", "dmtrack.features.bitplanes:BitPlanesFeature", channels=8, pyramid="recompute",

@@ -130,6 +130,9 @@ def test_rgb_chroma_smoothing_keeps_luma_and_blurs_the_colour_differences() -> N
     # a grey input has no chroma: returned exactly
     grey = np.repeat(np.random.default_rng(6).integers(0, 256, (16, 16, 1), dtype=np.uint8), 3, axis=2)
     np.testing.assert_array_equal(get_feature("rgb", scale=1.0, chroma_sigma=3.0).compute(grey), grey)
+    grey_f = grey.astype(np.float32)  # a float input is not modified in place
+    np.testing.assert_array_equal(get_feature("rgb", scale=2.0).compute(grey_f), 2 * grey.astype(np.float32))
+    np.testing.assert_array_equal(grey_f, grey)
 
 
 def test_lab_chroma_smoothing_blurs_a_and_b_only() -> None:

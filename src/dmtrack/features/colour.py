@@ -90,9 +90,8 @@ class RgbFeature(Feature):
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
         if self.chroma_sigma > 0:
-            out = smooth_rgb_chroma(image, self.chroma_sigma)
-            out *= np.float32(gain)
-            return out
+            # a new array: smooth_rgb_chroma returns a float32 input itself when there is nothing to smooth
+            return smooth_rgb_chroma(image, self.chroma_sigma) * np.float32(gain)
         out = np.empty(image.shape, np.float32)
         np.multiply(image, np.float32(gain), out=out, dtype=np.float32)
         return out

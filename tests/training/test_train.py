@@ -50,7 +50,7 @@ def test_same_seed_gives_byte_identical_weights(tmp_path) -> None:
 
 def test_bad_options_are_input_errors(tmp_path) -> None:
     bad_options = (dict(data="7scenes"), dict(data="kitti"), dict(channels=0), dict(minutes=0.0), dict(crop=(100, 100)),
-                   dict(lr_schedule="step"), dict(lr_schedule="cosine", steps=None))
+                   dict(lr_schedule="step"), dict(lr_schedule="cosine", steps=None), dict(lr_final=0.0))
     for bad in bad_options:
         with pytest.raises(InputError):
             train(tmp_path / "x", TrainOptions(**{**SMALL, **bad}))

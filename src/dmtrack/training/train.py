@@ -184,6 +184,8 @@ class TrainOptions:
             )
         if self.lr_schedule not in LR_SCHEDULES:
             raise InputError(f"--lr-schedule must be one of {', '.join(LR_SCHEDULES)}, not {self.lr_schedule!r}")
+        if not 0 < self.lr_final <= 1:
+            raise InputError(f"lr_final must be in (0, 1], got {self.lr_final}")
         if self.lr_schedule == "cosine" and self.steps is None:
             raise InputError("--lr-schedule cosine needs --steps N: the schedule runs over a known number of steps")
         if not 1 <= self.channels <= 64:

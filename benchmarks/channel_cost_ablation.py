@@ -193,5 +193,11 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def run_default_rule(out: Path, features: list[str], sequences: str, seeds: str, jobs: str, data: str) -> int:
+    """:func:`main` for ``features`` (registered by the caller before the pool forks) with the default rule only."""
+    return main(["--out", str(out), "--features", ",".join(features), "--sequences", sequences, "--seeds", seeds,
+                 "--jobs", str(jobs), "--data", str(data), "--variant", "balanced=channel_cost=balanced"])  # fmt: skip
+
+
 if __name__ == "__main__":
     sys.exit(main())

@@ -28,7 +28,6 @@ import json
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -40,13 +39,9 @@ from dmtrack.features.colour import LabFeature, RgbFeature  # noqa: E402
 SAMPLES = [REPO / "data" / "7scenes-redkitchen-0000-0299" / f"frame-{i:06d}.color.jpg" for i in range(0, 300, 15)]
 
 
-def _lab(image: np.ndarray) -> np.ndarray:
-    rgb = image.astype(np.float32) * np.float32(1.0 / 255.0)
-    np.clip(rgb, 0.0, 1.0, out=rgb)
-    lab = cv2.cvtColor(rgb, cv2.COLOR_RGB2Lab)
-    lab[:, :, 0] *= np.float32(255.0 / 100.0)
-    lab[:, :, 1:] += np.float32(128.0)
-    return lab
+def _lab(image: np.ndarray, chroma_sigma: float = 0.0) -> np.ndarray:
+    """The package's lab at scale 1 (2.55·L*, a*+128, b*+128), plain or with its chroma low-pass."""
+    return LabFeature(1.0, chroma_sigma=chroma_sigma).compute(image)
 
 
 class _Subset(Feature):
@@ -95,25 +90,18 @@ class RgbG(_Subset):
         return image[:, :, 1:2]
 
 
-def _blur_chroma(lab: np.ndarray, sigma: float) -> np.ndarray:
-    for c in (1, 2):
-        lab[:, :, c] = cv2.GaussianBlur(np.ascontiguousarray(lab[:, :, c]), (0, 0), sigma,
-                                        borderType=cv2.BORDER_REFLECT_101)  # fmt: skip
-    return lab
-
-
 class LabCS2(_Subset):
     name, channels, description = "lab-cs2", 3, "lab with a*, b* Gaussian-blurred (sigma 2 px)"
 
     def channels_of(self, image: np.ndarray) -> np.ndarray:
-        return _blur_chroma(_lab(image), 2.0)
+        return _lab(image, 2.0)
 
 
 class GreyABCS2(_Subset):
     name, channels, description = "grey-ab-cs2", 3, "grey-ab with a*, b* Gaussian-blurred (sigma 2 px)"
 
     def channels_of(self, image: np.ndarray) -> np.ndarray:
-        lab = _blur_chroma(_lab(image), 2.0)
+        lab = _lab(image, 2.0)
         lab[:, :, 0] = prepare_image(image, colour=False)
         return lab
 
@@ -175,9 +163,7 @@ def main(argv: list[str] | None = None) -> int:
                  description=VARIANTS[name].description, replace=True)  # fmt: skip
     import channel_cost_ablation
 
-    return channel_cost_ablation.main(["--out", str(a.out), "--features", ",".join(names), "--sequences",
-                                       a.sequences, "--seeds", a.seeds, "--jobs", a.jobs, "--data", a.data,
-                                       "--variant", "balanced=channel_cost=balanced"])  # fmt: skip
+    return channel_cost_ablation.run_default_rule(a.out, names, a.sequences, a.seeds, a.jobs, a.data)
 
 
 if __name__ == "__main__":

@@ -57,9 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         names.append(name)
     import channel_cost_ablation
 
-    return channel_cost_ablation.main(["--out", str(a.out), "--features", ",".join(names), "--sequences",
-                                       a.sequences, "--seeds", a.seeds, "--jobs", a.jobs, "--data", a.data,
-                                       "--variant", "balanced=channel_cost=balanced"])  # fmt: skip
+    return channel_cost_ablation.run_default_rule(a.out, names, a.sequences, a.seeds, a.jobs, a.data)
 
 
 if __name__ == "__main__":

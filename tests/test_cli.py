@@ -119,6 +119,28 @@ def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sa
     assert reduced.channels == 2
 
 
+def test_calibrate_scale_with_options_is_kept_for_those_options(
+    capsys: pytest.CaptureFixture[str], sample_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A scale calibrated with --feature-opt is stored with its options: it serves that variant, not the defaults,
+    and calibrating does not warn that the variant is uncalibrated."""
+    import warnings
+
+    from dmtrack.features import get_feature
+    from dmtrack.features.base import default_scales_table
+
+    monkeypatch.setenv("DMTRACK_HOME", str(tmp_path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["calibrate-scale", "--feature", "lab", "--feature-opt", "chroma_sigma=0.5", str(sample_dir),
+                     "--frames", "2", "--save", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    saved = json.loads(Path(result["saved_to"]).read_text())["scales"]["lab"]
+    assert saved["options"] == {"chroma_sigma": 0.5} and saved["scale"] == result["scale"]
+    assert get_feature("lab", chroma_sigma=0.5).scale == pytest.approx(result["scale"])
+    assert get_feature("lab").scale == default_scales_table()["scales"]["lab"]["scale"]
+
+
 def test_eval_kitti_groundtruth_against_tum_estimate(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """KITTI ground truth has no timestamps: --times gives them, so a TUM estimate can be associated."""
     from dmtrack.io.trajectory import Trajectory, write_kitti, write_tum

@@ -304,13 +304,15 @@ def cmd_calibrate_scale(args: argparse.Namespace) -> int:
     from dmtrack.features.base import save_user_scale
     from dmtrack.features.scale import calibrate_scale_detailed
 
-    feature = get_feature(args.feature, **_feature_options(args.feature_opt))
+    with warnings.catch_warnings():  # "no calibration of its own" is what this command is about to measure
+        warnings.simplefilter("ignore", UserWarning)
+        feature = get_feature(args.feature, **_feature_options(args.feature_opt))
     images = _sample_images(args.sequences, args.frames, args.format, None)
     cal = calibrate_scale_detailed(feature, images, args.min_use_grad)
     result = {"feature": feature.name, "scale": cal.scale, "images": len(images), "min_use_grad": args.min_use_grad,
               **{k: v for k, v in vars(cal).items() if k != "scale" and isinstance(v, (int, float, str))}}
     if args.save:
-        result["saved_to"] = str(save_user_scale(feature.name, cal.scale, images=len(images),
+        result["saved_to"] = str(save_user_scale(feature.name, cal.scale, feature.options, images=len(images),
                                                  sequences=[str(s) for s in args.sequences]))
     if args.json:
         print(json.dumps(result, indent=2))

@@ -242,10 +242,11 @@ def test_rgb_channels_carry_independent_noise() -> None:
     the plain channels; low-passing the chroma (the default) removes most of the chroma noise: the noise is then
     nearly one channel's (the luma's), and κ grows because the luma carries less noise than any one channel."""
     imgs = _images(2, 96, 128)
-    plain = measure_channel_statistics(get_feature("rgb", chroma_sigma=0), imgs, pixels="all")
+    plain_rgb = get_feature("rgb", chroma_sigma=0)  # at its own calibrated scale (the table's variant)
+    plain = measure_channel_statistics(plain_rgb, imgs, pixels="all")
     assert plain.noise_channels == pytest.approx(3.0, rel=0.02)
     w2 = 0.299**2 + 0.587**2 + 0.114**2
-    assert plain.info_channels == pytest.approx(3.0 * w2 / get_feature("rgb").scale ** 2, rel=0.05)
+    assert plain.info_channels == pytest.approx(3.0 * w2 / plain_rgb.scale ** 2, rel=0.05)
     smooth = measure_channel_statistics("rgb", imgs, pixels="all")
     assert smooth.noise_channels < 1.3 and smooth.info_channels > 1.3 * plain.info_channels
 
@@ -264,3 +265,77 @@ def test_packaged_channel_statistics_and_feature_properties(sample_dir: Path) ->
     got = compute_channel_statistics(_table_images(sample_dir)[:20], ["bitplanes"])["bitplanes"]
     assert got["energy_channels"] == table["bitplanes"]["energy_channels"]
     assert got["info_channels"] == table["bitplanes"]["info_channels"]
+
+
+# ------------------------------------------------------------------ calibration per options (entries and variants)
+def test_packaged_entries_are_measured_with_the_defaults() -> None:
+    """Each table entry's recorded options are the feature's defaults (they are what get_feature uses without
+    options); the variants' are not."""
+    from dmtrack.features.base import option_defaults, options_match
+
+    for name, entry in default_scales_table()["scales"].items():
+        defaults = option_defaults(name)
+        assert options_match(entry.get("options"), None, defaults), name
+        for variant in entry.get("variants", ()):
+            assert not options_match(variant["options"], None, defaults), name
+
+
+@pytest.mark.parametrize("name", ["rgb", "lab"])
+def test_plain_colour_gets_its_own_calibration(name: str) -> None:
+    entry = default_scales_table()["scales"][name]
+    (plain,) = entry["variants"]
+    f = get_feature(name, chroma_sigma=0)
+    assert f.scale == plain["scale"] != entry["scale"]
+    assert f.energy_channels == plain["energy_channels"] and f.info_channels == plain["info_channels"]
+    # the defaults, given explicitly (2 == 2.0), take the entry itself, and no warning
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        d = get_feature(name, chroma_sigma=2)
+    assert d.scale == entry["scale"] and d.energy_channels == entry["energy_channels"]
+    # an explicit scale rescales the variant's counts (N_E ∝ s², κ ∝ 1/s²)
+    g = get_feature(name, chroma_sigma=0.0, scale=2 * plain["scale"])
+    assert g.energy_channels == pytest.approx(4 * plain["energy_channels"])
+    assert g.info_channels == pytest.approx(plain["info_channels"] / 4)
+
+
+def test_plain_colour_variant_is_reproduced_on_the_sample(sample_dir: Path) -> None:
+    (plain,) = default_scales_table()["scales"]["rgb"]["variants"]
+    cal = calibrate_scale_detailed(get_feature("rgb", **plain["options"]), _table_images(sample_dir))
+    assert cal.scale == pytest.approx(plain["scale"], abs=1e-4)
+
+
+def test_uncalibrated_options_warn_and_use_the_defaults_calibration() -> None:
+    from dmtrack.features import base
+
+    base._WARNED.clear()
+    entry = default_scales_table()["scales"]["lab"]
+    with pytest.warns(UserWarning, match=r"'lab' with chroma_sigma=1\.5 has no calibration of its own.*"
+                      r"default scale.*N_E, κ.*--feature-opt chroma_sigma=1\.5.*--features lab:chroma_sigma=1\.5"):
+        f = get_feature("lab", chroma_sigma=1.5)
+    assert f.scale == entry["scale"] and f.energy_channels == entry["energy_channels"]
+    with pytest.warns(UserWarning, match="N_E, κ") as record:  # with a scale, only the counts are missing
+        get_feature("rgb", chroma_sigma=3, scale=1.0)
+    assert "default scale" not in str(record[0].message)
+    import warnings
+
+    with warnings.catch_warnings():  # once per feature and options
+        warnings.simplefilter("error")
+        get_feature("lab", chroma_sigma=1.5)
+        get_feature("gray")
+
+
+def test_user_calibration_is_kept_per_options(monkeypatch, tmp_path: Path) -> None:
+    from dmtrack.features.base import save_user_scale, user_scales
+
+    monkeypatch.setenv("DMTRACK_HOME", str(tmp_path))
+    packaged = default_scales_table()["scales"]["rgb"]
+    save_user_scale("rgb", 1.7, {"chroma_sigma": 0.0})
+    assert user_scales()["rgb"]["options"] == {"chroma_sigma": 0.0}
+    assert get_feature("rgb", chroma_sigma=0).scale == 1.7
+    assert get_feature("rgb").scale == packaged["scale"]  # the defaults are not what was calibrated
+    save_user_scale("rgb", 1.1, {"chroma_sigma": 2.0})  # the defaults: recorded without options
+    assert "options" not in user_scales()["rgb"]
+    assert get_feature("rgb").scale == 1.1 and default_scale("rgb") == 1.1
+    assert get_feature("rgb", chroma_sigma=0).scale == packaged["variants"][0]["scale"]

@@ -27,7 +27,15 @@ Default scales
 --------------
 ``default_scales.json`` (packaged next to this file) holds the calibrated default scale of each feature
 (:func:`dmtrack.features.scale.calibrate_scale`).  The scale used when ``get_feature`` gets none is, in order:
-the table's value, the ``scale`` given to :func:`register`, 1.
+the user's calibration (``dmtrack calibrate-scale --save``), the table's value, the ``scale`` given to
+:func:`register`, 1.
+
+Calibrations belong to options: a table entry records the options it was measured with (the feature's defaults)
+and may hold ``variants`` measured with others (``rgb``/``lab`` with ``chroma_sigma=0``); a user calibration records
+the options that differ from the defaults. ``get_feature(name, **options)`` takes the scale and the channel counts
+N_E, κ of the calibration measured with exactly these options (numbers compare by value), and records the options on
+the instance (:attr:`Feature.options`). When none was, it uses the default options' numbers and warns once, naming
+the commands that measure them.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ import json
 import os
 import re
 import threading
+import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -231,19 +240,19 @@ class Feature(ABC):
                 maps.append(downsample_feature(maps[-1]))
         return maps
 
+    #: The options this instance was built with, recorded by :func:`get_feature` (defaults filled in); ``None``
+    #: for an instance constructed directly, which is then looked up as if built with its defaults.
+    options: dict[str, Any] | None = None
+
     def _channel_stat(self, key: str, power: int) -> float | None:
         if int(self.channels) == 1:
             return 1.0
-        entry = default_scales_table()["scales"].get(self.name)
-        if entry and key in entry:
-            value, at_scale = float(entry[key]), float(entry["scale"])
-        else:
-            reg = _entries().get(self.name)
-            value = None if reg is None else getattr(reg, key)
-            if value is None or reg is None or reg.scale is None:
-                return None
-            value, at_scale = float(value), float(reg.scale)
-        return value * (float(self.scale) / at_scale) ** power
+        cal = channel_calibration(self.name, self.options)
+        if cal is None and self.options is not None:  # options measured by nobody: the defaults' (get_feature warns)
+            cal = channel_calibration(self.name)
+        if cal is None or cal.get(key) is None:
+            return None
+        return float(cal[key]) * (float(self.scale) / float(cal["scale"])) ** power
 
     @property
     def energy_channels(self) -> float | None:
@@ -336,11 +345,15 @@ def user_scales() -> dict[str, Any]:
     return scales
 
 
-def save_user_scale(name: str, scale: float, **details: Any) -> Path:
-    """Store a calibrated scale for ``name`` in the user's table (atomically); returns the file."""
+def save_user_scale(name: str, scale: float, options: dict[str, Any] | None = None, **details: Any) -> Path:
+    """Store a calibrated scale for ``name`` built with ``options`` in the user's table (atomically; one entry per
+    name, the options that differ from the defaults recorded with it); returns the file."""
     path = user_scales_path()
     scales = user_scales()
-    scales[name] = {"scale": check_scale(scale), **details}
+    defaults = option_defaults(name) if options else {}
+    changed = {k: os.fspath(v) if isinstance(v, os.PathLike) else v
+               for k, v in (options or {}).items() if not _same_value(v, defaults.get(k, object()))}
+    scales[name] = {"scale": check_scale(scale), **({"options": changed} if changed else {}), **details}
     write_text(path, json.dumps({"scales": scales}, indent=2) + "\n")
     return path
 
@@ -350,12 +363,84 @@ def user_pca_path(base: str, k: int | None = None) -> Path:
     return user_dir() / "pca" / (f"{base}-pca{k}.npz" if k is not None else f"{base}.npz")
 
 
-def default_scale(name: str) -> float | None:
-    """Default scale of feature ``name``: the user's calibration if any, else ``default_scales.json``'s, else None."""
-    entry = user_scales().get(name) or default_scales_table()["scales"].get(name)
+def option_defaults(name: str) -> dict[str, Any]:
+    """The options of feature ``name`` with their default values (the factory's keyword defaults, ``scale``
+    excluded); imports the feature's module. Empty for an unknown name."""
+    entry = _entries().get(name)
     if entry is None:
-        return None
-    return float(entry["scale"])
+        return {}
+    try:
+        sig = inspect.signature(entry.resolve())
+    except (TypeError, ValueError):  # pragma: no cover - builtins without signature
+        return {}
+    return {
+        p.name: p.default
+        for p in sig.parameters.values()
+        if p.name != "scale" and p.default is not inspect.Parameter.empty
+        and p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    a, b = (os.fspath(x) if isinstance(x, os.PathLike) else x for x in (a, b))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool | np.bool_) \
+            and not isinstance(b, bool | np.bool_):
+        return float(a) == float(b)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b, strict=True))
+    return bool(a == b)
+
+
+def options_match(recorded: dict[str, Any] | None, options: dict[str, Any] | None, defaults: dict[str, Any]) -> bool:
+    """Whether a calibration measured with ``recorded`` options applies to a feature built with ``options``; both
+    are completed with ``defaults`` (an entry recorded without options, or a feature built without any, means the
+    defaults), numbers compare by value (2 == 2.0)."""
+    a = {**defaults, **(recorded or {})}
+    b = {**defaults, **(options or {})}
+    return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+
+
+def _calibration_entries(name: str) -> Iterator[tuple[str, dict[str, Any]]]:
+    """The packaged calibrations of ``name``: its ``default_scales.json`` entry, then that entry's ``variants``
+    (the same keys, measured with other options), then the registry's values (measured with the defaults)."""
+    entry = default_scales_table()["scales"].get(name)
+    if entry:
+        yield "default_scales.json", entry
+        for variant in entry.get("variants", ()):
+            yield "default_scales.json", variant
+    reg = _entries().get(name)
+    if reg is not None and reg.scale is not None:
+        yield "registry", {"scale": reg.scale, "energy_channels": reg.energy_channels,
+                           "info_channels": reg.info_channels}
+
+
+def channel_calibration(name: str, options: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """The packaged calibration of feature ``name`` built with ``options`` (``None``: its defaults): a dict with
+    ``scale`` and, where measured, ``energy_channels`` (N_E) and ``info_channels`` (κ) at that scale; ``None``
+    when no packaged calibration was measured with these options."""
+    if options is None:  # the defaults: the first entry is measured with them (without importing the feature)
+        return next((entry for _, entry in _calibration_entries(name)), None)
+    defaults = option_defaults(name)
+    for _, entry in _calibration_entries(name):
+        if options_match(entry.get("options"), options, defaults):
+            return entry
+    return None
+
+
+def default_scale(name: str, options: dict[str, Any] | None = None) -> float | None:
+    """Default scale of feature ``name`` built with ``options`` (``None``: its defaults): the user's calibration
+    if one was saved for these options, else ``default_scales.json``'s (its entry or a variant measured with these
+    options), else None."""
+    user = user_scales().get(name)
+    entry = default_scales_table()["scales"].get(name)
+    if options is None:  # the defaults (without importing the feature: list_features never imports torch)
+        found = user if user is not None and not user.get("options") else entry
+        return None if found is None else float(found["scale"])
+    defaults = option_defaults(name)
+    for candidate in (user, entry, *(entry or {}).get("variants", ())):
+        if candidate is not None and options_match(candidate.get("options"), options, defaults):
+            return float(candidate["scale"])
+    return None
 
 
 # --------------------------------------------------------------------------------------------- registry
@@ -385,9 +470,13 @@ class FeatureEntry:
             return self.factory
         return _import_factory(self.factory, self.name)
 
-    def default_scale(self) -> float:
-        """The scale used when none is given: the packaged table's, else the registered one, else 1."""
-        s = default_scale(self.name)
+    def default_scale(self, options: dict[str, Any] | None = None) -> float:
+        """The scale used when none is given, for ``options`` (``None``: the defaults): the user's or the packaged
+        table's calibration for these options, else the default options' (the table's, else the registered one),
+        else 1."""
+        s = default_scale(self.name, options) if options else None
+        if s is None:
+            s = default_scale(self.name)
         if s is None:
             s = self.scale
         return 1.0 if s is None else float(s)
@@ -555,14 +644,64 @@ def _build(entry: FeatureEntry, scale: float | None, options: dict[str, Any]) ->
             f"feature {entry.name!r} has no option(s) {', '.join(unknown)}; "
             f"its options are: {', '.join(allowed) if allowed else '(none)'}"
         )
-    s = entry.default_scale() if scale is None else check_scale(scale)
+    if scale is not None:
+        s = check_scale(scale)
+    elif options:
+        s = entry.default_scale(options)
+    else:
+        s = entry.default_scale()
     try:
         feature = factory(scale=s, **options)
     except InputError:
         raise
     except (TypeError, ValueError) as exc:
         raise InputError(f"feature {entry.name!r}: {exc}") from exc
+    if options and isinstance(feature, Feature):
+        defaults = option_defaults(entry.name)
+        feature.options = {**defaults, **options}
+        if not options_match(None, options, defaults):
+            _warn_uncalibrated(feature, entry, given_scale=scale is not None)
     return feature
+
+
+def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, given_scale: bool) -> None:
+    """Warn once per (feature, options) when non-default options have no calibration of their own, so that the
+    defaults' scale (without ``scale=``) and N_E, κ (multichannel) stand in for it."""
+    options = feature.options or {}
+    defaults = option_defaults(entry.name)
+    changed = {k: v for k, v in options.items() if not _same_value(v, defaults.get(k))}
+    missing = []
+    if not given_scale and default_scale(entry.name, options) is None \
+            and (default_scale(entry.name) is not None or entry.scale is not None):
+        missing.append(f"default scale (using the default options' {entry.default_scale():g})")
+    counts = int(feature.channels) > 1 and channel_calibration(entry.name, options) is None \
+        and channel_calibration(entry.name) is not None
+    if counts:
+        missing.append("channel counts N_E, κ (using the default options', rescaled to its scale)")
+    if not missing:
+        return
+    key = (entry.name, tuple(sorted((k, repr(v)) for k, v in changed.items())))
+    if key in _WARNED:
+        return
+    _WARNED.add(key)
+    opts = ", ".join(f"{k}={v!r}" for k, v in sorted(changed.items()))
+    cli_opts = " ".join(f"--feature-opt {k}={v}" for k, v in sorted(changed.items()))
+    how = []
+    if not given_scale and missing[0].startswith("default scale"):
+        how.append(f"`dmtrack calibrate-scale --feature {entry.name} {cli_opts} SEQUENCE... --save` (or pass scale=)")
+    if counts:
+        spec = ":".join([entry.name, *(f"{k}={v}" for k, v in sorted(changed.items()))])
+        how.append(f"`python -m dmtrack.features.scale --channels --features {spec} FRAMES...`, then "
+                   "--set energy_channels=N_E --set info_channels=κ")
+    warnings.warn(
+        f"feature {entry.name!r} with {opts} has no calibration of its own: {'; '.join(missing)}. "
+        f"Measure it with {' and '.join(how)}.",
+        UserWarning,
+        stacklevel=4,
+    )
+
+
+_WARNED: set[tuple[str, tuple[tuple[str, str], ...]]] = set()
 
 
 def get_feature(name: str, **options: Any) -> Feature:

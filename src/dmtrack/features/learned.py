@@ -23,7 +23,7 @@ they cannot be recalibrated here); ``tfeat`` and ``disk`` were calibrated with
 :func:`dmtrack.features.scale.compute_default_scales` on the same 20 sample frames as ``default_scales.json``
 (target 130091.6 semi-dense pixels per frame, achieved 130091.4 and 130091.6); ``alexnet64`` is uncalibrated (1).
 ``tfeat`` and ``disk`` also carry their channel counts N_E and κ for ``channel_cost="balanced"``, measured on the
-same frames (semi-dense pixels) with ``python -m dmtrack.features.scale --channels tfeat,disk FRAMES``
+same frames (semi-dense pixels) with ``python -m dmtrack.features.scale --channels --features tfeat,disk FRAMES``
 (docs/multichannel-cost.md); the values are in their entries below. The other learned features have none (the channel
 mean is used).
 """

@@ -440,26 +440,61 @@ def compute_channel_statistics(
     return out
 
 
-def _main() -> None:  # pragma: no cover - maintenance entry point (python -m dmtrack.features.scale FRAMES...)
-    import sys
+def parse_feature_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``NAME`` or ``NAME:key=value[:key=value...]`` → (name, options); values are YAML scalars (``2``, ``0.5``,
+    ``none``, ``box``)."""
+    import yaml
 
-    args = sys.argv[1:]
-    if args[:1] == ["--channels"]:
-        # python -m dmtrack.features.scale --channels rgb,lab,... [--pixels all|semi-dense] FRAMES...:
-        # prints N_E and κ per feature
-        pixels = "semi-dense"
-        if len(args) > 3 and args[2] == "--pixels":
-            pixels = args[3]
-            args = args[:2] + args[4:]
-        if len(args) < 3:
-            print("usage: python -m dmtrack.features.scale --channels NAMES [--pixels P] IMAGE...", file=sys.stderr)
-            raise SystemExit(2)
-        print(json.dumps(compute_channel_statistics(args[2:], args[1].split(","), pixels=pixels), indent=2))
+    name, *items = spec.split(":")
+    options: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"feature {spec!r}: expected NAME:key=value, got {item!r}")
+        options[key.strip()] = yaml.safe_load(raw)
+    return name.strip(), options
+
+
+def _main(argv: Sequence[str] | None = None) -> None:
+    """Maintenance entry point: ``python -m dmtrack.features.scale [--channels] [--features SPECS] FRAMES...``."""
+    import argparse
+    import warnings
+
+    parser = argparse.ArgumentParser(
+        prog="python -m dmtrack.features.scale",
+        description="Print default_scales.json's numbers for the sample frames: the calibrated default scales, or "
+        "with --channels N_E and κ (each feature at its packaged default scale for its options).",
+    )
+    parser.add_argument("frames", nargs="+", metavar="FRAME", help="image files (the table: 20 sample frames)")
+    parser.add_argument("--channels", action="store_true",
+                        help="measure N_E and κ instead of the scales")
+    parser.add_argument("--features", default=None, metavar="SPECS",
+                        help="comma-separated NAME or NAME:key=value[:key=value] (e.g. rgb:chroma_sigma=0); "
+                        "default rgb,lab,bitplanes,dsift")
+    parser.add_argument("--pixels", choices=("semi-dense", "all"), default="semi-dense",
+                        help="pixels the channel statistics average over (default semi-dense)")
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore", UserWarning)  # "no calibration of its own": what this measures
+    specs = (args.features or "rgb,lab,bitplanes,dsift").split(",")
+    parsed = [parse_feature_spec(s) for s in specs]
+    if args.channels:
+        images = [read_image(p) for p in args.frames]
+        out = {}
+        for spec, (name, opts) in zip(specs, parsed, strict=True):
+            cal = measure_channel_statistics(as_feature(name, **opts), images, pixels=args.pixels)
+            out[spec] = {
+                "energy_channels": round(cal.energy_channels, 3),
+                "info_channels": round(cal.info_channels, 3),
+                "noise_var": round(cal.noise_var, 3),
+                "grey_noise_var": round(cal.grey_noise_var, 3),
+                "noise_channels": round(cal.noise_channels, 2),
+            }
+        print(json.dumps(out, indent=2))
         return
-    if not args:
-        print("usage: python -m dmtrack.features.scale [--channels NAMES] IMAGE...", file=sys.stderr)
-        raise SystemExit(2)
-    print(json.dumps(compute_default_scales(args), indent=2))
+    table: dict[str, Any] = {}
+    for spec, (name, opts) in zip(specs, parsed, strict=True):
+        table[spec] = compute_default_scales(args.frames, [name], options={name: opts})["scales"][name]
+    print(json.dumps({"scales": table, "images": list(args.frames)}, indent=2))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -176,6 +176,7 @@ def test_track_many_equals_separate_runs(sample_dir: Path) -> None:
         # the feature's measured channel counts are filled in and recorded
         assert got.metrics["energy_channels"] == bp.energy_channels
         assert got.metrics["info_channels"] == bp.info_channels
+        assert got.metrics["noise_energy_channels"] == bp.noise_energy_channels
     assert many[0].trajectory.poses.tobytes() != many[1].trajectory.poses.tobytes()
     with pytest.raises(InputError):
         track_many(sample_dir, "gray", [])

@@ -41,7 +41,7 @@ from dmtrack.geometry.camera import PinholeCamera, crop_image
 from dmtrack.io.atomic import prepare_folder, write_text
 from dmtrack.io.trajectory import Trajectory, write_tum
 from dmtrack.odometry._fastmath import kernel_target
-from dmtrack.odometry.config import VOConfig
+from dmtrack.odometry.config import CHANNEL_STAT_KEYS, VOConfig
 from dmtrack.odometry.sink import OutputSink
 from dmtrack.odometry.vo import VisualOdometry, VOResult
 from dmtrack.outputs.memory import MultiSink
@@ -560,11 +560,11 @@ def _track_sequence(
 
 
 def _for_feature(config: VOConfig, feat: Any) -> VOConfig:
-    """``config`` completed for ``feat``: Gray-A switches on affine brightness; ``energy_channels`` and
-    ``info_channels`` left None take the feature's measured values."""
+    """``config`` completed for ``feat``: Gray-A switches on affine brightness; ``energy_channels``,
+    ``info_channels`` and ``noise_energy_channels`` left None take the feature's measured values."""
     if getattr(feat, "affine_brightness", False) and not config.tracker.affine:
         config = config.with_overrides("tracker.affine=true")
-    for key in ("energy_channels", "info_channels"):
+    for key in CHANNEL_STAT_KEYS:
         if getattr(config, key) is None:
             value = getattr(feat, key, None)
             if value is not None:
@@ -726,6 +726,7 @@ def metrics_dict(
         "channel_cost": config.channel_cost,
         "energy_channels": _finite(config.energy_channels),
         "info_channels": _finite(config.info_channels),
+        "noise_energy_channels": _finite(config.noise_energy_channels),
         "r_l": r_l,
         "dmtrack_version": __version__,
         **kernel_target(),

@@ -257,7 +257,11 @@ def test_packaged_channel_statistics_and_feature_properties(sample_dir: Path) ->
         f = get_feature(name)
         assert f.energy_channels == table[name]["energy_channels"] and f.info_channels == table[name]["info_channels"]
         assert 0 < f.info_channels <= f.channels and 0 < f.energy_channels
+        n_sigma = f.channels * table[name]["noise_var"] / table[name]["grey_noise_var"]  # N_σ = Σ_c σ_c² / σ_g²
+        assert f.noise_energy_channels == pytest.approx(n_sigma, rel=1e-12)
+        assert get_feature(name, scale=2 * f.scale).noise_energy_channels == pytest.approx(4 * n_sigma)
     assert get_feature("gray").energy_channels == 1.0 and get_feature("gray").info_channels == 1.0
+    assert get_feature("gray").noise_energy_channels == 1.0
     bp = get_feature("bitplanes", scale=2 * table["bitplanes"]["scale"])
     assert bp.energy_channels == pytest.approx(4 * table["bitplanes"]["energy_channels"])
     assert bp.info_channels == pytest.approx(table["bitplanes"]["info_channels"] / 4)

@@ -224,6 +224,11 @@ def test_channel_rule_reduces_to_grey_for_one_channel():
     # balanced: SSD ÷ N_E; information Σg²/N_E·(κ N_E/N) = κ·mean(g²); good/bad constant N_E·40²
     assert ChannelRule.of("balanced", 8, 2.0, 1.5) == ChannelRule(1.0 / 1.5, 2.0 * 1.5 / 8, 1.5)
     assert ChannelRule.of("balanced", 8) == ChannelRule.of("mean", 8)  # unmeasured feature: the channel mean
+    # the good/bad test's noise term: N_σ − N_E (balanced only; none for N = 1, "sum", "mean" or unknown N_σ)
+    assert ChannelRule.of("balanced", 8, 2.0, 1.5, 41.5).noise_excess == 40.0
+    assert ChannelRule.of("balanced", 1, 2.0, 1.5, 41.5).noise_excess == 0.0
+    assert ChannelRule.of("sum", 8, 2.0, 1.5, 41.5).noise_excess == 0.0
+    assert ChannelRule.of("mean", 8, 2.0, 1.5, 41.5).noise_excess == 0.0
     with pytest.raises(InputError):
         ChannelRule.of("max", 3)
 

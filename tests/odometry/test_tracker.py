@@ -126,10 +126,11 @@ def track(
     use_numba: bool = True,
     init=None,
     channel_cost: str = "balanced",
+    **rule: float,
 ):
     fk, ff = pair.frames(copies)
     ref = TrackingReference.from_keyframe(fk, *pair.depth_for(fk), use_numba=use_numba)
-    tracker = Tracker(config or TrackerConfig(), use_numba=use_numba, channel_cost=channel_cost)
+    tracker = Tracker(config or TrackerConfig(), use_numba=use_numba, channel_cost=channel_cost, **rule)
     return tracker.track(ref, ff, np.eye(4) if init is None else init)
 
 
@@ -398,6 +399,41 @@ def test_deterministic_and_parallel_identical(grey: Pair) -> None:
         assert c.T_fk.tobytes() == a.T_fk.tobytes() and c.last_residual == a.last_residual
         assert c.ref_pixel_was_good.tobytes() == a.ref_pixel_was_good.tobytes()
         assert c.iterations == a.iterations and c.evaluations == a.evaluations
+
+
+def test_tracking_decision_adds_the_features_extra_noise(grey: Pair) -> None:
+    """balanced: the decision "tracking good" counts Σ_c r_c² < N_E·g² + (N_σ − N_E)·σ² + ¼Σ_c|∇F_c|² (g =
+    good_residual, σ² = camera_pixel_noise2 = 16); the per-pixel flags keep N_E·g². Three copies of grey with
+    N_E = 3 and N_σ = 3 + 6 have the decision constant 3·g² + 96 = 3·(g² + 32): the counts of grey with
+    good_residual² = g² + 32, and grey's own flags and pose. With N_σ = N_E (or none) it is grey's test. g = 4
+    makes the test bite."""
+    tight = TrackerConfig(good_residual=4.0)
+    one = track(grey, tight)
+    assert one.bad_count > 100
+    three = track(grey, tight, copies=3, energy_channels=3.0)
+    same = track(grey, tight, copies=3, energy_channels=3.0, noise_energy_channels=3.0)
+    for t in (three, same):
+        assert (t.good_count, t.bad_count) == (one.good_count, one.bad_count)
+        assert t.ref_pixel_was_good.tobytes() == three.ref_pixel_was_good.tobytes()
+    wider_grey = track(grey, TrackerConfig(good_residual=48**0.5))
+    noisy = track(grey, tight, copies=3, energy_channels=3.0, noise_energy_channels=9.0)
+    # (N = 3 sums in float32, grey in float64: a point or two on the border may fall either way)
+    assert abs(noisy.good_count - wider_grey.good_count) <= 2
+    assert noisy.good_count + noisy.bad_count == wider_grey.good_count + wider_grey.bad_count
+    assert noisy.good_count > one.good_count + 100  # the decision's test changed: more points pass
+    # ... and nothing else did: the flags, the pose and the iterations are those without the term
+    assert noisy.ref_pixel_was_good.tobytes() == three.ref_pixel_was_good.tobytes()
+    assert noisy.T_fk.tobytes() == three.T_fk.tobytes() and noisy.iterations == three.iterations
+    assert noisy.evaluations[1] == three.evaluations[1] + 1  # one more count at the final pose
+    # the decision follows the counts: a good ratio that fails without the term passes with it
+    strict = TrackerConfig(good_residual=4.0, min_good_ratio=one.good_count / (one.good_count + one.bad_count))
+    assert not track(grey, strict, copies=3, energy_channels=3.0).good
+    assert track(grey, strict, copies=3, energy_channels=3.0, noise_energy_channels=9.0).good
+    # "sum" and "mean" keep the channel mean whatever N_σ
+    for cost in ("sum", "mean"):
+        a = track(grey, tight, copies=3, channel_cost=cost, energy_channels=3.0, noise_energy_channels=9.0)
+        b = track(grey, tight, copies=3, channel_cost=cost)
+        assert (a.good_count, a.bad_count) == (b.good_count, b.bad_count)
 
 
 def test_three_copies_of_grey_give_the_grey_pose(grey: Pair) -> None:

@@ -250,9 +250,14 @@ class Feature(ABC):
         cal = channel_calibration(self.name, self.options)
         if cal is None and self.options is not None:  # options measured by nobody: the defaults' (get_feature warns)
             cal = channel_calibration(self.name)
-        if cal is None or cal.get(key) is None:
+        if cal is None:
             return None
-        return float(cal[key]) * (float(self.scale) / float(cal["scale"])) ** power
+        value = cal.get(key)
+        if value is None and key == "noise_energy_channels" and cal.get("noise_var") and cal.get("grey_noise_var"):
+            value = int(self.channels) * float(cal["noise_var"]) / float(cal["grey_noise_var"])
+        if value is None:
+            return None
+        return float(value) * (float(self.scale) / float(cal["scale"])) ** power
 
     @property
     def energy_channels(self) -> float | None:
@@ -268,6 +273,15 @@ class Feature(ABC):
         ``channel_cost="balanced"``): 1 for a 1-channel feature, else the measured value (as
         :attr:`energy_channels`) times (measured scale / scale)². ``None`` when not measured (the odometry uses 1)."""
         return self._channel_stat("info_channels", -2)
+
+    @property
+    def noise_energy_channels(self) -> float | None:
+        """N_σ, the noise-energy channel count Σ_c σ_c² / σ_g² at this instance's scale (odometry
+        ``channel_cost="balanced"``'s good/bad test; docs/multichannel-cost.md): 1 for a 1-channel feature, else
+        N·noise_var/grey_noise_var as measured by :func:`dmtrack.features.scale.measure_channel_statistics`
+        (``default_scales.json``, or the registry entry), times (scale / measured scale)². ``None`` when not
+        measured (the odometry then adds no noise term)."""
+        return self._channel_stat("noise_energy_channels", 2)
 
     def info(self) -> dict[str, Any]:
         """Description of this instance (the same keys as :func:`list_features`)."""
@@ -411,7 +425,7 @@ def _calibration_entries(name: str) -> Iterator[tuple[str, dict[str, Any]]]:
     reg = _entries().get(name)
     if reg is not None and reg.scale is not None:
         yield "registry", {"scale": reg.scale, "energy_channels": reg.energy_channels,
-                           "info_channels": reg.info_channels}
+                           "info_channels": reg.info_channels, "noise_energy_channels": reg.noise_energy_channels}
 
 
 def channel_calibration(name: str, options: dict[str, Any] | None = None) -> dict[str, Any] | None:
@@ -463,6 +477,7 @@ class FeatureEntry:
     description: str = ""
     energy_channels: float | None = None
     info_channels: float | None = None
+    noise_energy_channels: float | None = None
 
     def resolve(self) -> Callable[..., Feature]:
         """The factory callable (imports its module if given as a string)."""
@@ -519,6 +534,7 @@ def register(
     replace: bool = False,
     energy_channels: float | None = None,
     info_channels: float | None = None,
+    noise_energy_channels: float | None = None,
 ) -> FeatureEntry:
     """Register a feature under ``name``.
 
@@ -535,9 +551,10 @@ def register(
         As the :class:`Feature` attributes.
     scale : float, optional
         Default scale used when ``default_scales.json`` has no entry for ``name``.
-    energy_channels, info_channels : float, optional
-        N_E and κ measured at ``scale`` (:func:`dmtrack.features.scale.measure_channel_statistics`), used
-        when ``default_scales.json`` has none for ``name``.
+    energy_channels, info_channels, noise_energy_channels : float, optional
+        N_E, κ and N_σ (N·noise_var/grey_noise_var) measured at ``scale``
+        (:func:`dmtrack.features.scale.measure_channel_statistics`), used when ``default_scales.json`` has none
+        for ``name``.
     replace : bool
         Allow replacing an existing entry.
 
@@ -570,6 +587,7 @@ def register(
         description=description,
         energy_channels=None if energy_channels is None else float(energy_channels),
         info_channels=None if info_channels is None else float(info_channels),
+        noise_energy_channels=None if noise_energy_channels is None else float(noise_energy_channels),
     )
     with _LOCK:
         if name in _REGISTRY and not replace:
@@ -855,6 +873,6 @@ register(
 )
 register(  # scale, N_E and κ measured like default_scales.json's on its 20 sample frames (weights/TRACKNET.md)
     "tracknet", "dmtrack.features.tracknet:TrackNetFeature", channels=8, scale=108.4974, energy_channels=9.49,
-    info_channels=1.045,
+    info_channels=1.045, noise_energy_channels=110.066,  # N_σ = 8·99.706/7.247 (noise_var / grey's, same frames)
     description="small CNN trained through the tracker's alignment (preliminary weights: weights/TRACKNET.md)",
 )

@@ -65,6 +65,7 @@ _ENTRIES = (
         scale=29.3193,  # calibrated like default_scales.json (20 sample frames 0, 15, ..., 285; minUseGrad 5)
         energy_channels=31.516,  # N_E and κ at that scale, same frames, semi-dense pixels (measure_channel_statistics)
         info_channels=7.819,
+        noise_energy_channels=3227.854,  # N_σ = N·noise_var/grey_noise_var = 128·182.752/7.247, same measurement
         description="TFeat (Liberty) descriptor of the 32x32 patch at every pixel (dense, shipped weights), 128-D",
     ),
     dict(
@@ -74,6 +75,7 @@ _ENTRIES = (
         scale=8.3247,  # calibrated like default_scales.json (20 sample frames 0, 15, ..., 285; minUseGrad 5)
         energy_channels=24.032,  # N_E and κ at that scale, same frames, semi-dense pixels (measure_channel_statistics)
         info_channels=107.321,
+        noise_energy_channels=150.202,  # N_σ = N·noise_var/grey_noise_var = 128·8.504/7.247, same measurement
         needs_colour=True,
         needs_torch=True,
         description="DISK U-Net dense descriptors at full resolution (shipped 'depth' weights), 128-D",

@@ -325,5 +325,11 @@ class TrackNetFeature(Feature):
         v = self._file_stat("info_channels", -2)
         return v if v is not None or not self.packaged else super().info_channels
 
+    @property
+    def noise_energy_channels(self) -> float | None:
+        """N_σ at this scale: from the weights file's ``meta`` when measured there, else the registry's."""
+        v = self._file_stat("noise_energy_channels", 2)
+        return v if v is not None or not self.packaged else super().noise_energy_channels
+
     def __repr__(self) -> str:
         return f"TrackNetFeature(scale={self.scale:g}, channels={self.channels}, weights={str(self.weights.path)!r})"

@@ -90,6 +90,10 @@ RENAMED_KEYS = {
 }
 
 
+#: The measured channel statistics of a feature that :class:`VOConfig` takes (``None``: the feature's).
+CHANNEL_STAT_KEYS = ("info_channels", "energy_channels", "noise_energy_channels")
+
+
 @dataclass(frozen=True)
 class ChannelRule:
     """The channel reductions of :attr:`VOConfig.channel_cost` for an N-channel feature map.
@@ -98,17 +102,21 @@ class ChannelRule:
     tracker's error, the stereo SSD, the propagation colour test). ``info``: factor applied, on top of
     ``residual``, to the gradient sums that act as information (the photometric disparity variance and the
     epipolar-gradient gate), so that information = Σ_c g_c² · residual · info. ``good``: factor of the
-    constant of the tracker's good/bad test Σ_c r_c² < good·40² + ¼Σ_c|∇F_c|². All are exactly 1 for N = 1 in
-    every mode.
+    constant of the tracker's good/bad test Σ_c r_c² < good·40² + ¼Σ_c|∇F_c|²; the count that decides whether
+    the tracking is good adds noise_excess·σ², σ² the tracker's ``camera_pixel_noise2``. All are exactly 1
+    (``noise_excess`` 0) for N = 1 in every mode.
 
     ``"sum"``: (1, 1, N); ``"mean"``: (1/N, 1, N); ``"balanced"``: (1/N_E, κ·N_E/N, N_E) with N_E =
-    ``energy_channels`` and κ = ``info_channels`` (N and 1 when unknown). The good/bad test of ``"sum"`` and
-    ``"mean"`` is the channel mean (N·40²), as it always was.
+    ``energy_channels`` and κ = ``info_channels`` (N and 1 when unknown), and ``noise_excess`` = N_σ − N_E with
+    N_σ = ``noise_energy_channels`` (0 when unknown): the residual noise Σ_c σ_c² that the feature carries beyond
+    the grey-equivalent N_E·σ² (docs/multichannel-cost.md, "The good/bad test and the feature's own noise"). The
+    good/bad test of ``"sum"`` and ``"mean"`` is the channel mean (N·40²), as it always was.
     """
 
     residual: float
     info: float
     good: float = 1.0
+    noise_excess: float = 0.0
 
     @classmethod
     def of(
@@ -117,6 +125,7 @@ class ChannelRule:
         n_channels: int,
         info_channels: float | None = None,
         energy_channels: float | None = None,
+        noise_energy_channels: float | None = None,
     ) -> ChannelRule:
         if channel_cost not in CHANNEL_COSTS:
             raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {_short(channel_cost)}")
@@ -129,7 +138,8 @@ class ChannelRule:
             return cls(1.0 / n, 1.0, float(n))
         n_e = float(n) if energy_channels is None else float(energy_channels)
         kappa = 1.0 if info_channels is None else float(info_channels)
-        return cls(1.0 / n_e, kappa * n_e / n, n_e)
+        excess = 0.0 if noise_energy_channels is None else float(noise_energy_channels) - n_e
+        return cls(1.0 / n_e, kappa * n_e / n, n_e, excess)
 
 
 #: Values of ``DepthConfig.update_variance`` (the kernels encode them by position).
@@ -276,6 +286,14 @@ class VOConfig:
     misalignment costs what it costs in grey — LSD-SLAM's stereo and residual thresholds are set in those units
     (``MAX_ERROR_STEREO`` + 20·√gradAlongLine). ``None``: the feature's calibrated value (filled in by
     :func:`dmtrack.track`), or N for a feature map of unknown origin."""
+    noise_energy_channels: float | None = None
+    """Noise-energy channel count N_σ = Σ_c σ_c² / σ_g² of the feature, used by ``channel_cost="balanced"``'s
+    tracking-quality decision: the residual variance that image noise leaves in the N channels, relative to
+    grey's, measured once per feature like N_E (``default_scales.json``: N·noise_var/grey_noise_var). The good/bad
+    count that decides whether a frame's tracking is good (hence a loss) uses the constant N_E·40² +
+    (N_σ − N_E)·``tracker.camera_pixel_noise2``: the grey allowance for appearance change, in feature units, plus
+    the noise the feature has beyond a grey-like one; the per-pixel flags keep N_E·40². ``None``: the feature's
+    calibrated value (filled in by :func:`dmtrack.track`), or N_E (no extra noise) when it has none."""
     init: str = "random"
     """How the first keyframe's depth starts: ``"random"`` (LSD-SLAM's seeded random inverse depth, the paper's
     setting) or ``"groundtruth"`` (the dataset's depth of the first frame, as LSD-SLAM's ``gtDepthInit``:
@@ -284,7 +302,7 @@ class VOConfig:
     def __post_init__(self) -> None:
         if self.channel_cost not in CHANNEL_COSTS:
             raise InputError(f"channel_cost must be one of {', '.join(CHANNEL_COSTS)}, not {_short(self.channel_cost)}")
-        for key in ("info_channels", "energy_channels"):
+        for key in CHANNEL_STAT_KEYS:
             v = getattr(self, key)
             if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf")):
                 raise InputError(f"{key} must be a positive number, not {_short(v)}")

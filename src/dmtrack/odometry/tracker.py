@@ -184,7 +184,9 @@ class TrackResult:
     reason : str | None
         Why tracking diverged or is not good; None when good.
     good_count, bad_count : int
-        Good and bad in-image points of the last evaluation at the finest level.
+        Good and bad in-image points of the last evaluation at the finest level, as counted by the test that
+        decides ``good``: for ``channel_cost="balanced"`` with a measured N_σ ≠ N_E, the constant N_E·40² +
+        (N_σ − N_E)·``camera_pixel_noise2`` (the per-pixel flags keep N_E·40²).
     point_usage : float
         Σ min(1, z_ref/z') / #points of the last evaluation.
     last_residual : float
@@ -263,10 +265,15 @@ class Tracker:
     channel_cost : str
         :attr:`VOConfig.channel_cost <dmtrack.odometry.config.VOConfig.channel_cost>`: ``"sum"`` sums the
         error over channels, ``"mean"`` averages it, ``"balanced"`` divides it by ``energy_channels`` N_E
-        (the good/bad test's constant is N·40² for "sum"/"mean", N_E·40² for "balanced"; see
+        (the good/bad test's constant is N·40² for "sum"/"mean", N_E·40² (+ the noise term below) for
+        "balanced"; see
         :class:`~dmtrack.odometry.config.ChannelRule`).
     energy_channels : float, optional
         N_E of the feature (``VOConfig.energy_channels``); N when None.
+    noise_energy_channels : float, optional
+        N_σ of the feature (``VOConfig.noise_energy_channels``): "balanced" adds (N_σ − N_E)·``camera_pixel_noise2``
+        to the good/bad test's constant when it decides whether the tracking is good (one more residual count at
+        the final pose; the per-pixel ``ref_pixel_was_good`` flags keep N_E·40²); no term when None.
     """
 
     def __init__(
@@ -277,10 +284,12 @@ class Tracker:
         parallel_min_points: int = 4 * BLOCK,
         channel_cost: str = "balanced",
         energy_channels: float | None = None,
+        noise_energy_channels: float | None = None,
     ):
         self.config = config if config is not None else TrackerConfig()
         self.channel_cost = channel_cost
         self.energy_channels = energy_channels
+        self.noise_energy_channels = noise_energy_channels
         ChannelRule.of(channel_cost, 1)  # validates the name
         self.use_numba = use_numba
         self.parallel = parallel
@@ -297,7 +306,7 @@ class Tracker:
 
     # ------------------------------------------------------------------ one evaluation
     def _level_eval(
-        self, rl: ReferenceLevel, frame_level: Any, flags: np.ndarray, write_flags: bool, good_fac: float
+        self, rl: ReferenceLevel, frame_level: Any, flags: np.ndarray, write_flags: bool, good_const: float
     ) -> _LevelEval:
         """The per-level constant part of every evaluation (kernel, arrays, parameters)."""
         cfg = self.config
@@ -312,7 +321,7 @@ class Tracker:
             cfg.var_weight,
             cfg.camera_pixel_noise2,
             cfg.huber_d / 2.0,
-            good_fac * cfg.good_residual**2,
+            good_const,
             cfg.good_grad_weight**2,
             cfg.affine_huber,
         )
@@ -377,9 +386,12 @@ class Tracker:
         if cfg.affine and frame.n_channels != 1:
             raise InputError("affine brightness estimation (Gray-A) needs a 1-channel feature")
         nch = frame.n_channels
-        rule = ChannelRule.of(self.channel_cost, nch, None, self.energy_channels)
+        rule = ChannelRule.of(self.channel_cost, nch, None, self.energy_channels, self.noise_energy_channels)
         ch_scale = rule.residual
-        good_fac = rule.good
+        # the good/bad test's constant: good·40² for the per-pixel flags (refPixelWasGood); the tracking-quality
+        # decision adds the feature's noise beyond a grey-like one (balanced rule, docs/multichannel-cost.md)
+        good_const = rule.good * cfg.good_residual**2
+        decision_const = good_const + rule.noise_excess * cfg.camera_pixel_noise2 if rule.noise_excess else None
 
         T = np.array(T_fk_init, dtype=np.float64, copy=True)
         if T.shape != (4, 4):
@@ -419,7 +431,7 @@ class Tracker:
             write = lvl == min_level
             thr = cfg.min_inlier_fraction * fl.width * fl.height
             bufs = [np.empty((rl.n_points, BUF_COLS)), np.empty((rl.n_points, BUF_COLS))]
-            lv = self._level_eval(rl, fl, flags, write, good_fac)
+            lv = self._level_eval(rl, fl, flags, write, good_const)
             update_fn = lv.update_fn
             cur = 0
             ev = self._evaluate(lv, T, a, b, bufs[cur], ch_scale)
@@ -471,6 +483,12 @@ class Tracker:
         n_ref = reference.level(min_level).n_points
         usage = last.usage / n_ref if n_ref > 0 else 0.0
         good_count, bad_count = last.good, last.bad
+        if decision_const is not None:  # the same residuals at the final pose, counted against the decision's constant
+            rl = reference.level(min_level)
+            lv = self._level_eval(rl, fl_min, flags, False, decision_const)
+            ev = self._evaluate(lv, T, a, b, np.empty((rl.n_points, BUF_COLS)), ch_scale)
+            evaluations[min_level] += 1
+            good_count, bad_count = ev.good, ev.bad
         n_pix = fl_min.width * fl_min.height
         ok_density = good_count / n_pix > cfg.min_good_per_pixel
         ok_ratio = good_count + bad_count > 0 and good_count / (good_count + bad_count) > cfg.min_good_ratio

@@ -294,6 +294,7 @@ class VisualOdometry:
             parallel=self.parallel,
             channel_cost=self.config.channel_cost,
             energy_channels=self.config.energy_channels,
+            noise_energy_channels=self.config.noise_energy_channels,
         )
         self._levels = tuple(self.config.tracker.levels)
         # state of the current keyframe

@@ -728,10 +728,11 @@ def calibrate_weights(path: str | Path, images: list[np.ndarray | str | Path]) -
     """Calibrate an exported ``tracknet.npz`` like every feature and record the result in its ``meta``.
 
     The default scale (:func:`dmtrack.features.scale.calibrate_scale_detailed`: as many semi-dense pixels as grey on
-    ``images``) and, at that scale, the channel statistics N_E and κ of the balanced cost rule
+    ``images``) and, at that scale, the channel statistics N_E, κ and N_σ of the balanced cost rule
     (:func:`dmtrack.features.scale.measure_channel_statistics`). ``meta`` gets ``scale``, ``energy_channels``,
-    ``info_channels`` and ``calibration`` (counts, image count); :class:`dmtrack.features.tracknet.TrackNetFeature`
-    reads N_E and κ from there. The file is rewritten atomically.
+    ``info_channels``, ``noise_energy_channels`` and ``calibration`` (counts, image count);
+    :class:`dmtrack.features.tracknet.TrackNetFeature` reads N_E, κ and N_σ from there. The file is rewritten
+    atomically.
     """
     from dmtrack.features.scale import calibrate_scale_detailed, measure_channel_statistics
     from dmtrack.features.tracknet import TrackNetFeature
@@ -741,7 +742,8 @@ def calibrate_weights(path: str | Path, images: list[np.ndarray | str | Path]) -
     path = Path(path)
     imgs = [read_image(p) if isinstance(p, (str, Path)) else np.asarray(p) for p in images]
     cal = calibrate_scale_detailed(TrackNetFeature(weights=path), imgs)
-    stats = measure_channel_statistics(TrackNetFeature(scale=cal.scale, weights=path), imgs)
+    feature = TrackNetFeature(scale=cal.scale, weights=path)
+    stats = measure_channel_statistics(feature, imgs)
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: np.asarray(z[k]) for k in z.files}
     meta = json.loads(str(arrays.pop("meta")))
@@ -749,6 +751,7 @@ def calibrate_weights(path: str | Path, images: list[np.ndarray | str | Path]) -
         "scale": round(cal.scale, 4),
         "energy_channels": round(stats.energy_channels, 3),
         "info_channels": round(stats.info_channels, 3),
+        "noise_energy_channels": round(feature.channels * stats.noise_var / stats.grey_noise_var, 3),
     }
     meta.update(result)
     meta["calibration"] = {"target_count": round(cal.target_count, 1), "achieved_count": round(cal.achieved_count, 1),

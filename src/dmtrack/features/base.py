@@ -48,17 +48,29 @@ import re
 import threading
 import warnings
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from functools import lru_cache
-from importlib import resources
 from pathlib import Path
 from typing import Any, Literal, get_args
 
-import cv2
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.features.images import (  # noqa: F401 - re-exported: the image helpers' home before images.py
+    downsample_feature,
+    downsample_image,
+    iter_images,
+    prepare_image,
+)
+from dmtrack.features.tables import (  # noqa: F401 - re-exported: the calibration tables' home before tables.py
+    default_scales_table,
+    options_match,
+    same_value,
+    user_dir,
+    user_pca_path,
+    user_scales,
+    user_scales_path,
+)
 from dmtrack.io.atomic import write_text
 
 PyramidPolicy = Literal["downsample", "recompute"]
@@ -72,78 +84,6 @@ _PCA_RE = re.compile(r"^(?P<base>.+)-pca(?P<k>[0-9]+)$")
 #: Factory of the PCA-reduced features ``BASE-pcaK``, imported when one is built, like every string factory:
 #: ``factory(build_base, basis, k=K, scale=...)`` (:func:`dmtrack.features.pca.reduce_feature`).
 PCA_FACTORY = "dmtrack.features.pca:reduce_feature"
-
-
-# ----------------------------------------------------------------------------------------------- images
-def prepare_image(image: np.ndarray, colour: bool) -> np.ndarray:
-    """Validate an input image and convert it to what a feature needs.
-
-    Parameters
-    ----------
-    image : np.ndarray
-        ``uint8`` or floating-point (values in 0..255; the "recompute" pyramid passes 2×2 box means, which are
-        float) image, ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA (alpha dropped).
-    colour : bool
-        True → return ``(H, W, 3)`` RGB (a grey image is replicated into three channels);
-        False → return ``(H, W)`` grey (colour is converted with OpenCV's RGB→grey weights
-        0.299 R + 0.587 G + 0.114 B, rounded for ``uint8``).
-
-    Returns
-    -------
-    np.ndarray
-        C-contiguous ``uint8`` (for ``uint8`` input) or ``float32`` array.
-
-    Raises
-    ------
-    InputError
-        Wrong dtype, number of dimensions or channels, or an empty image.
-    """
-    img = np.asarray(image)
-    if img.dtype == np.uint8:
-        pass
-    elif np.issubdtype(img.dtype, np.floating):
-        img = img.astype(np.float32, copy=False)
-    else:
-        raise InputError(f"feature input must be a uint8 or float image, got dtype {img.dtype}")
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    elif img.ndim == 3 and img.shape[2] == 4:
-        img = img[:, :, :3]
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
-        raise InputError(f"feature input must be (H, W) grey or (H, W, 3) RGB, got shape {img.shape}")
-    if img.shape[0] < 1 or img.shape[1] < 1:
-        raise InputError(f"feature input image is empty: shape {img.shape}")
-    img = np.ascontiguousarray(img)
-    if colour and img.ndim == 2:
-        img = np.ascontiguousarray(np.repeat(img[:, :, None], 3, axis=2))
-    elif not colour and img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
-    return img
-
-
-def iter_images(images: Iterable[np.ndarray | str | Path]) -> Iterator[np.ndarray]:
-    """Yield arrays from an iterable of arrays or image paths (paths are read as stored: grey or RGB)."""
-    from dmtrack.io.images import read_image
-
-    for im in images:
-        if isinstance(im, (str, Path)):
-            yield read_image(im)
-        else:
-            yield np.asarray(im)
-
-
-def downsample_image(image: np.ndarray) -> np.ndarray:
-    """2×2 box mean of an image, ``(h, w[, 3])`` → ``(h//2, w//2[, 3])`` float32 (odd last row/column dropped)."""
-    f = np.asarray(image, dtype=np.float32)
-    h2, w2 = f.shape[0] // 2, f.shape[1] // 2
-    f = f[: 2 * h2, : 2 * w2]
-    out = (f[0::2, 0::2] + f[0::2, 1::2]) + (f[1::2, 0::2] + f[1::2, 1::2])
-    return np.ascontiguousarray(out * np.float32(0.25), dtype=np.float32)
-
-
-def downsample_feature(feat: np.ndarray) -> np.ndarray:
-    """Per-channel 2×2 box mean of a feature map, ``(h, w, N)`` → ``(h//2, w//2, N)`` float32."""
-    return downsample_image(feat)
 
 
 # ---------------------------------------------------------------------------------------------- feature
@@ -323,42 +263,6 @@ def check_scale(scale: float) -> float:
 
 
 # -------------------------------------------------------------------------------------- default scales
-@lru_cache(maxsize=1)
-def default_scales_table() -> dict[str, Any]:
-    """The packaged ``default_scales.json`` (``{"scales": {name: {"scale": float, ...}}, ...}``)."""
-    text = resources.files("dmtrack.features").joinpath("default_scales.json").read_text(encoding="utf-8")
-    table = json.loads(text)
-    if not isinstance(table, dict) or not isinstance(table.get("scales"), dict):
-        raise RuntimeError("dmtrack/features/default_scales.json is malformed (no 'scales' object)")
-    return table
-
-
-def user_dir() -> Path:
-    """Where dmtrack keeps what users calibrate and fit: ``$DMTRACK_HOME``, else ``~/.config/dmtrack``."""
-    env = os.environ.get("DMTRACK_HOME")
-    return Path(env) if env else Path.home() / ".config" / "dmtrack"
-
-
-def user_scales_path() -> Path:
-    """The user's table of calibrated feature scales (written by ``dmtrack calibrate-scale --save``)."""
-    return user_dir() / "scales.json"
-
-
-def user_scales() -> dict[str, Any]:
-    """``{name: {"scale": float, ...}}`` from :func:`user_scales_path` (empty when there is none)."""
-    path = user_scales_path()
-    if not path.is_file():
-        return {}
-    try:
-        table = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read the calibrated scales ({exc})", path=path) from None
-    scales = table.get("scales") if isinstance(table, dict) else None
-    if not isinstance(scales, dict):
-        raise InputError("malformed scales file (expected {\"scales\": {name: {\"scale\": ...}}})", path=path)
-    return scales
-
-
 def save_user_scale(name: str, scale: float, options: dict[str, Any] | None = None, **details: Any) -> Path:
     """Store a calibrated scale for ``name`` built with ``options`` in the user's table (atomically; one entry per
     name, the options that differ from the defaults recorded with it); returns the file."""
@@ -366,15 +270,10 @@ def save_user_scale(name: str, scale: float, options: dict[str, Any] | None = No
     scales = user_scales()
     defaults = option_defaults(name) if options else {}
     changed = {k: os.fspath(v) if isinstance(v, os.PathLike) else v
-               for k, v in (options or {}).items() if not _same_value(v, defaults.get(k, object()))}
+               for k, v in (options or {}).items() if not same_value(v, defaults.get(k, object()))}
     scales[name] = {"scale": check_scale(scale), **({"options": changed} if changed else {}), **details}
     write_text(path, json.dumps({"scales": scales}, indent=2) + "\n")
     return path
-
-
-def user_pca_path(base: str, k: int | None = None) -> Path:
-    """Where ``dmtrack fit-pca`` stores a basis: ``pca/BASE-pcaK.npz`` (or ``pca/BASE.npz`` for all components)."""
-    return user_dir() / "pca" / (f"{base}-pca{k}.npz" if k is not None else f"{base}.npz")
 
 
 def option_defaults(name: str) -> dict[str, Any]:
@@ -393,25 +292,6 @@ def option_defaults(name: str) -> dict[str, Any]:
         if p.name != "scale" and p.default is not inspect.Parameter.empty
         and p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
     }
-
-
-def _same_value(a: Any, b: Any) -> bool:
-    a, b = (os.fspath(x) if isinstance(x, os.PathLike) else x for x in (a, b))
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool | np.bool_) \
-            and not isinstance(b, bool | np.bool_):
-        return float(a) == float(b)
-    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
-        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b, strict=True))
-    return bool(a == b)
-
-
-def options_match(recorded: dict[str, Any] | None, options: dict[str, Any] | None, defaults: dict[str, Any]) -> bool:
-    """Whether a calibration measured with ``recorded`` options applies to a feature built with ``options``; both
-    are completed with ``defaults`` (an entry recorded without options, or a feature built without any, means the
-    defaults), numbers compare by value (2 == 2.0)."""
-    a = {**defaults, **(recorded or {})}
-    b = {**defaults, **(options or {})}
-    return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
 
 
 def _calibration_entries(name: str) -> Iterator[tuple[str, dict[str, Any]]]:
@@ -687,7 +567,7 @@ def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, given_scale: bool)
     defaults' scale (without ``scale=``) and N_E, κ (multichannel) stand in for it."""
     options = feature.options or {}
     defaults = option_defaults(entry.name)
-    changed = {k: v for k, v in options.items() if not _same_value(v, defaults.get(k))}
+    changed = {k: v for k, v in options.items() if not same_value(v, defaults.get(k))}
     missing = []
     if not given_scale and default_scale(entry.name, options) is None \
             and (default_scale(entry.name) is not None or entry.scale is not None):

@@ -343,3 +343,20 @@ def test_user_calibration_is_kept_per_options(monkeypatch, tmp_path: Path) -> No
     assert "options" not in user_scales()["rgb"]
     assert get_feature("rgb").scale == 1.1 and default_scale("rgb") == 1.1
     assert get_feature("rgb", chroma_sigma=0).scale == packaged["variants"][0]["scale"]
+
+
+def test_a_feature_with_its_own_counts_is_warned_only_about_the_scale() -> None:
+    """tracknet with another weights file: its N_E, κ, N_σ come from the file, so only a missing scale is warned."""
+    import warnings
+
+    from dmtrack.features import base
+    from dmtrack.features.tracknet import packaged_weights
+
+    base._WARNED.clear()
+    path = str(packaged_weights())  # the packaged file, named explicitly: an option value that differs from None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        get_feature("tracknet", weights=path, scale=50.0)
+    with pytest.warns(UserWarning, match="default scale") as record:
+        get_feature("tracknet", weights=path)
+    assert "N_E" not in str(record[0].message)

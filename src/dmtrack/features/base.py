@@ -572,7 +572,9 @@ def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, given_scale: bool)
     if not given_scale and default_scale(entry.name, options) is None \
             and (default_scale(entry.name) is not None or entry.scale is not None):
         missing.append(f"default scale (using the default options' {entry.default_scale():g})")
-    counts = int(feature.channels) > 1 and channel_calibration(entry.name, options) is None \
+    # a class that overrides the channel-count properties brings its own numbers (tracknet: its weights file's)
+    own_counts = type(feature).energy_channels is not Feature.energy_channels
+    counts = int(feature.channels) > 1 and not own_counts and channel_calibration(entry.name, options) is None \
         and channel_calibration(entry.name) is not None
     if counts:
         missing.append("channel counts N_E, κ (using the default options', rescaled to its scale)")

@@ -63,9 +63,9 @@ from dmtrack.features.images import (  # noqa: F401 - re-exported: the image hel
     prepare_image,
 )
 from dmtrack.features.tables import (  # noqa: F401 - re-exported: the calibration tables' home before tables.py
+    changed_options,
     default_scales_table,
     options_match,
-    same_value,
     user_dir,
     user_pca_path,
     user_scales,
@@ -268,9 +268,8 @@ def save_user_scale(name: str, scale: float, options: dict[str, Any] | None = No
     name, the options that differ from the defaults recorded with it); returns the file."""
     path = user_scales_path()
     scales = user_scales()
-    defaults = option_defaults(name) if options else {}
     changed = {k: os.fspath(v) if isinstance(v, os.PathLike) else v
-               for k, v in (options or {}).items() if not same_value(v, defaults.get(k, object()))}
+               for k, v in changed_options(options, option_defaults(name) if options else {}).items()}
     scales[name] = {"scale": check_scale(scale), **({"options": changed} if changed else {}), **details}
     write_text(path, json.dumps({"scales": scales}, indent=2) + "\n")
     return path
@@ -326,13 +325,14 @@ def default_scale(name: str, options: dict[str, Any] | None = None) -> float | N
     if one was saved for these options, else ``default_scales.json``'s (its entry or a variant measured with these
     options), else None."""
     user = user_scales().get(name)
-    entry = default_scales_table()["scales"].get(name)
     if options is None:  # the defaults (without importing the feature: list_features never imports torch)
-        found = user if user is not None and not user.get("options") else entry
+        found = user if user is not None and not user.get("options") else default_scales_table()["scales"].get(name)
         return None if found is None else float(found["scale"])
     defaults = option_defaults(name)
-    for candidate in (user, entry, *(entry or {}).get("variants", ())):
-        if candidate is not None and options_match(candidate.get("options"), options, defaults):
+    if user is not None and options_match(user.get("options"), options, defaults):
+        return float(user["scale"])
+    for source, candidate in _calibration_entries(name):
+        if source == "default_scales.json" and options_match(candidate.get("options"), options, defaults):
             return float(candidate["scale"])
     return None
 
@@ -558,19 +558,20 @@ def _build(entry: FeatureEntry, scale: float | None, options: dict[str, Any]) ->
         defaults = option_defaults(entry.name)
         feature.options = {**defaults, **options}
         if not options_match(None, options, defaults):
-            _warn_uncalibrated(feature, entry, given_scale=scale is not None)
+            _warn_uncalibrated(feature, entry, defaults, given_scale=scale is not None)
     return feature
 
 
-def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, given_scale: bool) -> None:
+def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, defaults: dict[str, Any], given_scale: bool) -> None:
     """Warn once per (feature, options) when non-default options have no calibration of their own, so that the
-    defaults' scale (without ``scale=``) and N_E, κ (multichannel) stand in for it."""
+    defaults' scale (without ``scale=``) and N_E, κ (multichannel) stand in for it. ``defaults``: the feature's
+    option defaults (:func:`option_defaults`)."""
     options = feature.options or {}
-    defaults = option_defaults(entry.name)
-    changed = {k: v for k, v in options.items() if not same_value(v, defaults.get(k))}
+    changed = changed_options(options, defaults)
     missing = []
-    if not given_scale and default_scale(entry.name, options) is None \
-            and (default_scale(entry.name) is not None or entry.scale is not None):
+    scale_missing = not given_scale and default_scale(entry.name, options) is None \
+        and (default_scale(entry.name) is not None or entry.scale is not None)
+    if scale_missing:
         missing.append(f"default scale (using the default options' {entry.default_scale():g})")
     # a class that overrides the channel-count properties brings its own numbers (tracknet: its weights file's)
     own_counts = type(feature).energy_channels is not Feature.energy_channels
@@ -587,7 +588,7 @@ def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, given_scale: bool)
     opts = ", ".join(f"{k}={v!r}" for k, v in sorted(changed.items()))
     cli_opts = " ".join(f"--feature-opt {k}={v}" for k, v in sorted(changed.items()))
     how = []
-    if not given_scale and missing[0].startswith("default scale"):
+    if scale_missing:
         how.append(f"`dmtrack calibrate-scale --feature {entry.name} {cli_opts} SEQUENCE... --save` (or pass scale=)")
     if counts:
         spec = ":".join([entry.name, *(f"{k}={v}" for k, v in sorted(changed.items()))])

@@ -424,12 +424,14 @@ def compute_channel_statistics(
     names: Sequence[str] = ("rgb", "lab", "bitplanes", "dsift"),
     pixels: str = "semi-dense",
 ) -> dict[str, dict[str, float]]:
-    """:func:`measure_channel_statistics` of several features (each at its default scale) on the same images:
-    ``{name: {"energy_channels", "info_channels", "noise_var", "grey_noise_var", "noise_channels"}}``."""
+    """:func:`measure_channel_statistics` of several features (each at its default scale for its options) on the same
+    images: ``{name: {"energy_channels", "info_channels", "noise_var", "grey_noise_var", "noise_channels"}}``.
+    A name may be a spec ``NAME:key=value[:key=value]`` (:func:`parse_feature_spec`); it keys its own row."""
     images = [read_image(p) for p in image_paths]
     out: dict[str, dict[str, float]] = {}
     for name in names:
-        cal = measure_channel_statistics(name, images, pixels=pixels)
+        base, opts = parse_feature_spec(name)
+        cal = measure_channel_statistics(as_feature(base, **opts), images, pixels=pixels)
         out[name] = {
             "energy_channels": round(cal.energy_channels, 3),
             "info_channels": round(cal.info_channels, 3),
@@ -476,23 +478,12 @@ def _main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore", UserWarning)  # "no calibration of its own": what this measures
     specs = (args.features or "rgb,lab,bitplanes,dsift").split(",")
-    parsed = [parse_feature_spec(s) for s in specs]
     if args.channels:
-        images = [read_image(p) for p in args.frames]
-        out = {}
-        for spec, (name, opts) in zip(specs, parsed, strict=True):
-            cal = measure_channel_statistics(as_feature(name, **opts), images, pixels=args.pixels)
-            out[spec] = {
-                "energy_channels": round(cal.energy_channels, 3),
-                "info_channels": round(cal.info_channels, 3),
-                "noise_var": round(cal.noise_var, 3),
-                "grey_noise_var": round(cal.grey_noise_var, 3),
-                "noise_channels": round(cal.noise_channels, 2),
-            }
-        print(json.dumps(out, indent=2))
+        print(json.dumps(compute_channel_statistics(args.frames, specs, pixels=args.pixels), indent=2))
         return
     table: dict[str, Any] = {}
-    for spec, (name, opts) in zip(specs, parsed, strict=True):
+    for spec in specs:
+        name, opts = parse_feature_spec(spec)
         table[spec] = compute_default_scales(args.frames, [name], options={name: opts})["scales"][name]
     print(json.dumps({"scales": table, "images": list(args.frames)}, indent=2))
 

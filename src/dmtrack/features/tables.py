@@ -20,6 +20,7 @@ import numpy as np
 from dmtrack.errors import InputError
 
 __all__ = [
+    "changed_options",
     "default_scales_table",
     "options_match",
     "same_value",
@@ -89,3 +90,9 @@ def options_match(recorded: dict[str, Any] | None, options: dict[str, Any] | Non
     b = {**defaults, **(options or {})}
     return a.keys() == b.keys() and all(same_value(a[k], b[k]) for k in a)
 
+
+def changed_options(options: dict[str, Any] | None, defaults: dict[str, Any]) -> dict[str, Any]:
+    """The items of ``options`` whose value differs from ``defaults``' (by :func:`same_value`; an option without a
+    default counts as changed)."""
+    missing = object()
+    return {k: v for k, v in (options or {}).items() if not same_value(v, defaults.get(k, missing))}

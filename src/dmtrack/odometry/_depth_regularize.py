@@ -15,7 +15,7 @@ from numba import prange
 
 from dmtrack.odometry._depth_common import (
     _JIT,
-    _JIT_INLINE,
+    _JIT_LLVM_INLINE,
     P_MIN_BLACKLIST,
     P_MIN_GRAD,
     P_VAL_SUM_CREATE,
@@ -32,7 +32,7 @@ DIFF_FAC_SMOOTHING = 1.0
 
 
 # ============================================================================== numba kernels
-@numba.njit(**_JIT_INLINE)
+@numba.njit(**_JIT_LLVM_INLINE)
 def _reg_term(vr, di, vi, val, d0, v0, c, fac, sv, ss, si, so, sk):  # pragma: no cover - compiled
     """One neighbour's float32 contribution to a pixel's regularisation sums (validity, Σ d/σ², Σ 1/σ², occluders,
     consistent neighbours), branch-free: ``c`` is its distance term."""
@@ -48,6 +48,106 @@ def _reg_term(vr, di, vi, val, d0, v0, c, fac, sv, ss, si, so, sk):  # pragma: n
     so += one if (vr & incons & (di > d0)) else zero
     sk += one if use else zero
     return sv, ss, si, so, sk
+
+
+@numba.njit(**_JIT)
+def _regularize_rows(
+    chunk,
+    valid,
+    blacklisted,
+    validity,
+    idepth,
+    var,
+    idepth_s,
+    var_s,
+    valid_read,
+    remove_occlusions,
+    validity_th,
+    reg_dist_var,
+):  # pragma: no cover - compiled
+    """Regularisation of the rows 2 + ``chunk``, 2 + ``chunk`` + ROW_CHUNKS, … (see :func:`_regularize_impl`).
+
+    A function of its own, called from the ``prange`` of :func:`_regularize_impl` rather than that loop's body
+    (as :func:`dmtrack.odometry._depth_update._observe_rows`): numba's parallel passes (copy propagation over the
+    loop body) took 7 of the 8 s that the kernel's parallel build took to compile when the body held the 25
+    IR-inlined neighbour terms."""
+    h, w = valid.shape
+    zero = np.float32(0.0)
+    fac = np.float32(DIFF_FAC_SMOOTHING)
+    # separate allocations (not rows of one array) so that LLVM can vectorise the passes
+    acc_s = np.empty(w, np.float32)
+    acc_i = np.empty(w, np.float32)
+    acc_v = np.empty(w, np.float32)
+    n_occ = np.empty(w, np.float32)
+    n_ok = np.empty(w, np.float32)
+    for y in range(2 + chunk, h - 2, ROW_CHUNKS):
+        x0 = 2
+        while x0 < w - 2 and not valid_read[y, x0]:
+            x0 += 1
+        if x0 == w - 2:
+            continue  # no valid pixel in this row: nothing to do
+        for x in range(w):
+            acc_s[x] = zero
+            acc_i[x] = zero
+            acc_v[x] = zero
+            n_occ[x] = zero
+            n_ok[x] = zero
+        for dy in range(-2, 3):
+            yy = y + dy
+            dy2 = dy * dy
+            # the offsets dx = −2 … 2 of this row, each with its distance term
+            c0 = np.float32((4 + dy2) * reg_dist_var)
+            c1 = np.float32((1 + dy2) * reg_dist_var)
+            c2 = np.float32((0 + dy2) * reg_dist_var)
+            c3 = np.float32((1 + dy2) * reg_dist_var)
+            c4 = np.float32((4 + dy2) * reg_dist_var)
+            for x in range(2, w - 2):  # (bounds LLVM can see: the loop is vectorised)
+                d0 = idepth[y, x]
+                v0 = var[y, x]
+                sv = acc_v[x]
+                ss = acc_s[x]
+                si = acc_i[x]
+                so = n_occ[x]
+                sk = n_ok[x]
+                # dx = −2 … 2, in LSD-SLAM's order (one inlined term each: the loop over x stays vectorised)
+                sv, ss, si, so, sk = _reg_term(
+                    valid_read[yy, x - 2], idepth[yy, x - 2], var[yy, x - 2], validity[yy, x - 2], d0, v0, c0, fac,
+                    sv, ss, si, so, sk,
+                )  # fmt: skip
+                sv, ss, si, so, sk = _reg_term(
+                    valid_read[yy, x - 1], idepth[yy, x - 1], var[yy, x - 1], validity[yy, x - 1], d0, v0, c1, fac,
+                    sv, ss, si, so, sk,
+                )  # fmt: skip
+                sv, ss, si, so, sk = _reg_term(
+                    valid_read[yy, x], idepth[yy, x], var[yy, x], validity[yy, x], d0, v0, c2, fac,
+                    sv, ss, si, so, sk,
+                )  # fmt: skip
+                sv, ss, si, so, sk = _reg_term(
+                    valid_read[yy, x + 1], idepth[yy, x + 1], var[yy, x + 1], validity[yy, x + 1], d0, v0, c3, fac,
+                    sv, ss, si, so, sk,
+                )  # fmt: skip
+                sv, ss, si, so, sk = _reg_term(
+                    valid_read[yy, x + 2], idepth[yy, x + 2], var[yy, x + 2], validity[yy, x + 2], d0, v0, c4, fac,
+                    sv, ss, si, so, sk,
+                )  # fmt: skip
+                acc_v[x] = sv
+                acc_s[x] = ss
+                acc_i[x] = si
+                n_occ[x] = so
+                n_ok[x] = sk
+        for x in range(x0, w - 2):
+            if not valid_read[y, x]:
+                continue
+            if acc_v[x] < validity_th:
+                valid[y, x] = False
+                blacklisted[y, x] -= 1
+                continue
+            if remove_occlusions and n_occ[x] > n_ok[x]:
+                valid[y, x] = False
+                continue
+            si = np.float64(acc_i[x])
+            idepth_s[y, x] = _unzero(np.float64(acc_s[x]) / si)
+            var_s[y, x] = 1.0 / si
 
 
 def _regularize_impl(
@@ -73,83 +173,12 @@ def _regularize_impl(
     for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
         for x in range(w):
             valid_read[y, x] = valid[y, x]
-    zero = np.float32(0.0)
-    fac = np.float32(DIFF_FAC_SMOOTHING)
+    # the prange index is unsigned inside the parallel build: int64 keeps one signature of _regularize_rows
     for chunk in prange(ROW_CHUNKS):
-        # separate allocations (not rows of one array) so that LLVM can vectorise the passes
-        acc_s = np.empty(w, np.float32)
-        acc_i = np.empty(w, np.float32)
-        acc_v = np.empty(w, np.float32)
-        n_occ = np.empty(w, np.float32)
-        n_ok = np.empty(w, np.float32)
-        for y in range(2 + chunk, h - 2, ROW_CHUNKS):
-            x0 = 2
-            while x0 < w - 2 and not valid_read[y, x0]:
-                x0 += 1
-            if x0 == w - 2:
-                continue  # no valid pixel in this row: nothing to do
-            for x in range(w):
-                acc_s[x] = zero
-                acc_i[x] = zero
-                acc_v[x] = zero
-                n_occ[x] = zero
-                n_ok[x] = zero
-            for dy in range(-2, 3):
-                yy = y + dy
-                dy2 = dy * dy
-                # the offsets dx = −2 … 2 of this row, each with its distance term
-                c0 = np.float32((4 + dy2) * reg_dist_var)
-                c1 = np.float32((1 + dy2) * reg_dist_var)
-                c2 = np.float32((0 + dy2) * reg_dist_var)
-                c3 = np.float32((1 + dy2) * reg_dist_var)
-                c4 = np.float32((4 + dy2) * reg_dist_var)
-                for x in range(2, w - 2):  # (bounds LLVM can see: the loop is vectorised)
-                    d0 = idepth[y, x]
-                    v0 = var[y, x]
-                    sv = acc_v[x]
-                    ss = acc_s[x]
-                    si = acc_i[x]
-                    so = n_occ[x]
-                    sk = n_ok[x]
-                    # dx = −2 … 2, in LSD-SLAM's order (one inlined term each: the loop over x stays vectorised)
-                    sv, ss, si, so, sk = _reg_term(
-                        valid_read[yy, x - 2], idepth[yy, x - 2], var[yy, x - 2], validity[yy, x - 2], d0, v0, c0, fac,
-                        sv, ss, si, so, sk,
-                    )  # fmt: skip
-                    sv, ss, si, so, sk = _reg_term(
-                        valid_read[yy, x - 1], idepth[yy, x - 1], var[yy, x - 1], validity[yy, x - 1], d0, v0, c1, fac,
-                        sv, ss, si, so, sk,
-                    )  # fmt: skip
-                    sv, ss, si, so, sk = _reg_term(
-                        valid_read[yy, x], idepth[yy, x], var[yy, x], validity[yy, x], d0, v0, c2, fac,
-                        sv, ss, si, so, sk,
-                    )  # fmt: skip
-                    sv, ss, si, so, sk = _reg_term(
-                        valid_read[yy, x + 1], idepth[yy, x + 1], var[yy, x + 1], validity[yy, x + 1], d0, v0, c3, fac,
-                        sv, ss, si, so, sk,
-                    )  # fmt: skip
-                    sv, ss, si, so, sk = _reg_term(
-                        valid_read[yy, x + 2], idepth[yy, x + 2], var[yy, x + 2], validity[yy, x + 2], d0, v0, c4, fac,
-                        sv, ss, si, so, sk,
-                    )  # fmt: skip
-                    acc_v[x] = sv
-                    acc_s[x] = ss
-                    acc_i[x] = si
-                    n_occ[x] = so
-                    n_ok[x] = sk
-            for x in range(x0, w - 2):
-                if not valid_read[y, x]:
-                    continue
-                if acc_v[x] < validity_th:
-                    valid[y, x] = False
-                    blacklisted[y, x] -= 1
-                    continue
-                if remove_occlusions and n_occ[x] > n_ok[x]:
-                    valid[y, x] = False
-                    continue
-                si = np.float64(acc_i[x])
-                idepth_s[y, x] = _unzero(np.float64(acc_s[x]) / si)
-                var_s[y, x] = 1.0 / si
+        _regularize_rows(
+            np.int64(chunk), valid, blacklisted, validity, idepth, var, idepth_s, var_s, valid_read,
+            remove_occlusions, validity_th, reg_dist_var,
+        )  # fmt: skip
 
 
 _regularize_serial = numba.njit(**_JIT)(_variant(_regularize_impl, "_serial"))

@@ -83,7 +83,7 @@ def test_cli_parser() -> None:
     assert got == ("o", 1.5, 4, 2, "synthetic", 1)
     assert args.func.__name__ == "cmd_train_feature"
     args = parser.parse_args(["train-feature", "--out", "o", "--data", "7scenes"])
-    with pytest.raises(InputError, match="not implemented yet"):
+    with pytest.raises(InputError, match="needs --data-path"):
         args.func(args)
     for bad in (["--minutes", "0"], ["--channels", "0"], ["--data", "kitti"]):
         with pytest.raises(SystemExit):

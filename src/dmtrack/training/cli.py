@@ -1,4 +1,4 @@
-"""``dmtrack train-feature --out DIR [--seed S] [--minutes M] [--steps N] [--channels K] [--data synthetic]``:
+"""``dmtrack train-feature --out DIR [--seed S] [--minutes M] [--steps N] [--channels K] [--data D --data-path P]``:
 train the ``tracknet`` feature through the tracker's alignment (:mod:`dmtrack.training.train`).
 
 Wire into the CLI with ``add_train_parser(sub)`` where ``sub`` is the subparsers object of
@@ -30,6 +30,7 @@ def cmd_train_feature(args: argparse.Namespace) -> int:
         steps=args.steps,
         channels=args.channels,
         data=args.data,
+        data_path=args.data_path,
         threads=args.threads,
         lr_schedule=args.lr_schedule,
     )
@@ -61,8 +62,9 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
         help="train the tracknet feature through the tracker's own alignment (needs PyTorch)",
         description="Train the small tracknet CNN by unrolling damped Gauss-Newton steps of the tracker's "
         "photometric objective on its feature maps and minimising the final pose error, on seeded synthetic "
-        "pairs (exact depth and pose). Writes tracknet.npz (use it with --feature tracknet --feature-opt "
-        "weights=FILE), checkpoint.pt, train_log.csv/json and training_curve.png. Deterministic: the weights after "
+        "pairs (exact depth and pose) and/or pairs of a real sequence with ground-truth poses. Writes tracknet.npz "
+        "(use it with --feature tracknet --feature-opt weights=FILE), checkpoint.pt, train_log.csv/json and "
+        "training_curve.png. Deterministic: the weights after "
         "N steps depend only on the seed and the options (--minutes stops after a machine-dependent number of "
         "steps; --steps N reproduces a run).",
     )
@@ -73,7 +75,11 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--steps", type=positive_int, metavar="N", help="stop after N steps (whichever comes first)")
     p.add_argument("--channels", type=positive_int, default=8, metavar="K", help="output channels K (default 8)")
     p.add_argument("--data", choices=("synthetic", "7scenes", "both"), default="synthetic",
-                   help="training data (default synthetic; 7scenes and both are not implemented yet)")
+                   help="training data: synthetic renderer (default), a real sequence with ground-truth poses "
+                   "(--data-path; depth from the odometry's own mapping at those poses), or both (half each)")
+    p.add_argument("--data-path", metavar="DIR",
+                   help="the real sequence of --data 7scenes/both, e.g. ../shared/data/7scenes-0000-0699 (never "
+                   "a sequence you evaluate on)")
     p.add_argument("--lr-schedule", choices=("constant", "cosine"), default="constant",
                    help="learning rate: constant 1e-3 (default), or cosine from 1e-3 to 5e-5 over --steps")
     p.add_argument("--threads", type=positive_int, default=1, metavar="N",

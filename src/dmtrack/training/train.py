@@ -33,8 +33,9 @@ every random draw from one ``numpy.random.Generator`` seeded with the seed. The 
 of (seed, N, the options); with ``--minutes`` the number of steps depends on the machine's speed, so the log
 records it (``--steps N`` reproduces the run).
 
-7-Scenes (``data="7scenes"``/``"both"``) is not implemented yet: its depth images are not registered to the colour
-camera (another sensor, another pose), and this training uses synthetic data only for now.
+Real data (``data="7scenes"``/``"both"``, ``data_path``): pairs of a sequence with ground-truth poses, the keyframe's
+depth mapped by the odometry itself at those poses (:mod:`dmtrack.training.realdata`; 7-Scenes' depth images are not
+registered to the colour camera, so they are not used).
 
 Outputs (every file through :mod:`dmtrack.io.atomic`): ``tracknet.npz`` (the export, also written at every
 checkpoint), ``checkpoint.pt`` (model, optimiser, step), ``train_log.csv`` (one row per step), ``train_log.json``
@@ -66,6 +67,7 @@ from dmtrack.odometry._tracker_points import idepth_downsample_numpy, make_point
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.training.alignment import AlignParams, lm_step, pack
 from dmtrack.training.model import TrackNet, export_npz
+from dmtrack.training.realdata import training_pairs
 
 DATA_CHOICES = ("synthetic", "7scenes", "both")
 LR_SCHEDULES = ("constant", "cosine")
@@ -94,7 +96,13 @@ class TrainOptions:
     channels, hidden, kernels
         The network (:class:`~dmtrack.training.model.TrackNet`).
     data : str
-        ``"synthetic"`` (``"7scenes"`` and ``"both"`` are not implemented yet).
+        ``"synthetic"``, ``"7scenes"`` (a real sequence with ground-truth poses, ``data_path``; depth from the
+        odometry's own mapping at those poses: :mod:`dmtrack.training.realdata`) or ``"both"`` (each pair from
+        either with probability ½).
+    data_path : str, optional
+        The real sequence of ``"7scenes"`` / ``"both"`` (e.g. ``../shared/data/7scenes-0000-0699``).
+    keyframe_every, mapping_frames
+        Real data: frames between two training keyframes, and frames before each mapped into its depth.
     gain : float
         Training gain G (see the module documentation).
     scale_weight : float
@@ -148,6 +156,9 @@ class TrainOptions:
     hidden: int = 8
     kernels: tuple[int, ...] = (5, 3)
     data: str = "synthetic"
+    data_path: str | None = None
+    keyframe_every: int = 10
+    mapping_frames: int = 12
     gain: float = 64.0
     scale_weight: float = 0.5
     calibrate_every: int = 25
@@ -177,11 +188,11 @@ class TrainOptions:
         """:class:`InputError` on impossible options."""
         if self.data not in DATA_CHOICES:
             raise InputError(f"--data must be one of {', '.join(DATA_CHOICES)}, not {self.data!r}")
-        if self.data != "synthetic":
-            raise InputError(
-                f"--data {self.data}: training on 7-Scenes is not implemented yet (its depth images are not "
-                "registered to the colour camera); use --data synthetic"
-            )
+        if self.data != "synthetic" and not self.data_path:
+            raise InputError(f"--data {self.data} needs --data-path DIR: a sequence with ground-truth poses, e.g. "
+                             "../shared/data/7scenes-0000-0699")  # fmt: skip
+        if self.keyframe_every < 1 or self.mapping_frames < 1:
+            raise InputError("keyframe_every and mapping_frames must be ≥ 1")
         if self.lr_schedule not in LR_SCHEDULES:
             raise InputError(f"--lr-schedule must be one of {', '.join(LR_SCHEDULES)}, not {self.lr_schedule!r}")
         if not 0 < self.lr_final <= 1:
@@ -205,13 +216,15 @@ class TrainOptions:
 # ============================================================================================ data
 @dataclass
 class Pair:
-    """A training pair: grey crops, the keyframe's inverse depth, the crop camera and the true T_fk."""
+    """A training pair: grey crops, the keyframe's inverse depth, the crop camera and the true T_fk; ``var``: the
+    inverse depth's variance where it is an estimate (real data; NaN depth = none), ``None`` for exact depth."""
 
     key_image: np.ndarray
     frame_image: np.ndarray
     idepth: np.ndarray
     camera: PinholeCamera
     T_fk: np.ndarray
+    var: np.ndarray | None = None
 
 
 def _sequence_config(seed: int, rng: np.random.Generator, n_frames: int) -> SyntheticConfig:
@@ -290,16 +303,22 @@ def reference_points(
     rng: np.random.Generator,
     fraction: float,
     max_points: int,
+    variance: np.ndarray | None = None,
 ) -> dict[int, LevelPoints]:
     """The tracker's reference points of each level from a level-0 inverse depth given on a random subset of pixels.
 
-    Variances are drawn log-uniformly in [1e-4, 1e-2] (1/m²) and the inverse depth is perturbed by noise of that
-    variance; the pyramid and the points are built by the tracker's own numpy references.
+    Exact depth (``variance`` None): variances are drawn log-uniformly in [1e-4, 1e-2] (1/m²) and the inverse depth
+    is perturbed by noise of that variance. Estimated depth: its own ``variance``, no noise added. The pyramid and
+    the points are built by the tracker's own numpy references.
     """
     h, w = idepth.shape
     mask = rng.random((h, w)) < fraction
-    var = np.where(mask, 10.0 ** rng.uniform(-4.0, -2.0, (h, w)), -1.0).astype(np.float32)
-    noisy = idepth + rng.standard_normal((h, w)) * np.sqrt(np.maximum(var, 0.0))
+    if variance is None:
+        var = np.where(mask, 10.0 ** rng.uniform(-4.0, -2.0, (h, w)), -1.0).astype(np.float32)
+        noisy = idepth + rng.standard_normal((h, w)) * np.sqrt(np.maximum(var, 0.0))
+    else:
+        var = np.where(mask & (variance > 0), variance, -1.0).astype(np.float32)
+        noisy = np.where(var > 0, idepth, np.nan)
     d = np.where(mask & (noisy > 1e-3), noisy, -1.0).astype(np.float32)
     var = np.where(d > 0, var, -1.0).astype(np.float32)
     pyr = [(d, var)]
@@ -562,7 +581,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
     net = TrackNet(opts.channels, opts.hidden, opts.kernels)
     optim = torch.optim.Adam(net.parameters(), lr=opts.lr)
     tracker = TrackerConfig()
-    data = SyntheticPairs(1000 + 100 * opts.seed, opts.n_sequences, opts.n_frames, rng)
+    data = training_pairs(opts, rng, say)
     n_levels = max(opts.levels) + 1
     calib = [data.sample(rng, opts.crop, opts.max_gap).key_image for _ in range(opts.calibration_images)]
     gain = float(opts.gain)
@@ -595,7 +614,9 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
         skipped = 0
         for _ in range(opts.batch):
             pair = data.sample(rng, opts.crop, opts.max_gap)
-            refs = reference_points(pair.idepth, pair.camera, opts.levels, rng, opts.point_fraction, opts.max_points)
+            refs = reference_points(
+                pair.idepth, pair.camera, opts.levels, rng, opts.point_fraction, opts.max_points, pair.var
+            )
             T0 = perturb(pair.T_fk, rng, opts.init_trans, opts.init_rot_deg, opts.identity_init)
             maps = net(torch.cat([to_tensor(pair.key_image), to_tensor(pair.frame_image)])) * gain
             fk = pyramid(maps[0].to(torch.float64), n_levels)

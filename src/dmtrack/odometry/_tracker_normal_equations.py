@@ -288,7 +288,13 @@ def se3_exp(xi: np.ndarray) -> np.ndarray:  # pragma: no cover
     W[1, 2] = -wx
     W[2, 0] = -wy
     W[2, 1] = wx
-    W2 = W @ W
+    W2 = np.zeros((3, 3))  # W·W by plain loops: numba's ``@`` calls BLAS and costs 1.3 s of compilation
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += W[i, k] * W[k, j]
+            W2[i, j] = acc
     T = np.eye(4)
     for i in range(3):
         for j in range(3):

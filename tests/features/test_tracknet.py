@@ -89,7 +89,8 @@ def test_packaged_weights_are_small_and_registered(frame) -> None:
     path = packaged_weights()
     assert path.is_file() and path.stat().st_size < 1 << 20
     w = load_tracknet()
-    assert w.meta.get("preliminary") is True  # the model card says so too
+    assert w.meta["data"] == "both" and w.meta["steps"] == 1500  # the model card's run (weights/TRACKNET.md)
+    assert w.meta["scale"] == pytest.approx(get_feature("tracknet").scale)  # the registry has its calibration
     listed = {d["name"]: d for d in list_features()}
     assert listed["tracknet"]["channels"] == w.channels
     assert listed["tracknet"]["needs_torch"] is False
@@ -132,3 +133,20 @@ def test_bad_weights_files(tmp_path) -> None:
         load_tracknet(tmp_path / "shape.npz")
     with pytest.raises(InputError, match="grey"):
         tracknet_forward(load_tracknet(), np.zeros((16, 16, 3), np.uint8))
+
+
+def test_registry_numbers_are_the_packaged_files_calibration(tmp_path, sample_dir) -> None:
+    """The registry's scale, N_E, κ and N_σ of ``tracknet`` are what calibrate_weights measures for the packaged file
+    on the 20 sample frames named in weights/TRACKNET.md."""
+    pytest.importorskip("torch")
+    import shutil
+
+    from dmtrack.training.train import calibrate_weights
+
+    copy = tmp_path / "w.npz"
+    shutil.copyfile(packaged_weights(), copy)
+    got = calibrate_weights(copy, [sample_dir / f"frame-{i:06d}.color.jpg" for i in range(0, 300, 15)])
+    feat = get_feature("tracknet")
+    want = {"scale": feat.scale, "energy_channels": feat.energy_channels, "info_channels": feat.info_channels,
+            "noise_energy_channels": feat.noise_energy_channels}  # fmt: skip
+    assert got == pytest.approx(want, rel=2e-3)

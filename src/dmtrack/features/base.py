@@ -754,8 +754,8 @@ register(
     "dsift", "dmtrack.features.dsift:DenseSiftFeature", channels=128,
     description="dense SIFT at every pixel, single scale, no orientation (SIFT flow style, 4x4 cells x 8 bins)",
 )
-register(  # scale, N_E and κ measured like default_scales.json's on its 20 sample frames (weights/TRACKNET.md)
-    "tracknet", "dmtrack.features.tracknet:TrackNetFeature", channels=8, scale=108.4974, energy_channels=9.49,
-    info_channels=1.045, noise_energy_channels=110.066,  # N_σ = 8·99.706/7.247 (noise_var / grey's, same frames)
-    description="small CNN trained through the tracker's alignment (preliminary weights: weights/TRACKNET.md)",
+register(  # scale, N_E, κ and N_σ measured like default_scales.json's on its 20 sample frames (weights/TRACKNET.md)
+    "tracknet", "dmtrack.features.tracknet:TrackNetFeature", channels=8, scale=78.403, energy_channels=3.348,
+    info_channels=2.755, noise_energy_channels=27.432,
+    description="small CNN trained through the tracker's alignment (synthetic + 7-Scenes pairs: weights/TRACKNET.md)",
 )

@@ -8,8 +8,9 @@ x/(1 + |x|), so every channel lies in (−1, 1) before the feature scale multipl
 (I − 128)/64, folded into the first layer.
 
 Weights: ``weights=PATH`` (an ``.npz`` written by ``dmtrack train-feature``), else the packaged default
-:data:`DEFAULT_WEIGHTS` in ``dmtrack/weights/`` beside TFeat's and DISK's, which is the result
-of a *short preliminary* training run (see ``TRACKNET.md`` there). The channel count is the file's.
+:data:`DEFAULT_WEIGHTS` in ``dmtrack/weights/`` beside TFeat's and DISK's: trained on synthetic pairs and on the shared
+7-Scenes frames (non-commercial research use only, like that data; ``tracknet-prelim.npz`` beside it was trained on
+synthetic data alone). See ``TRACKNET.md`` there. The channel count is the file's.
 
 The channel statistics of the balanced cost rule (N_E, κ) and the scale they were measured at are read from the
 file's ``meta`` (``energy_channels``, ``info_channels``, ``scale``) when present, so a retrained file brings its own;
@@ -32,8 +33,8 @@ import numpy as np
 from dmtrack.errors import InputError
 from dmtrack.features.base import Feature
 
-#: File name of the packaged weights (in ``dmtrack/features/weights/``).
-DEFAULT_WEIGHTS = "tracknet-prelim.npz"
+#: File name of the packaged default weights (in ``dmtrack/weights/``).
+DEFAULT_WEIGHTS = "tracknet-7s-synth.npz"
 NPZ_FORMAT = "dmtrack-tracknet-1"
 
 
@@ -289,14 +290,14 @@ class TrackNetFeature(Feature):
     scale : float
         Feature scale multiplied into the (−1, 1) output.
     weights : str or path, optional
-        A tracknet ``.npz``; default: the packaged preliminary weights. The registry's default scale is the
-        packaged file's: with another file pass its own scale too (``meta["scale"]`` after
+        A tracknet ``.npz``; default: the packaged weights (:data:`DEFAULT_WEIGHTS`). The registry's default scale
+        is the packaged file's: with another file pass its own scale too (``meta["scale"]`` after
         :func:`dmtrack.training.train.calibrate_weights`, or ``dmtrack calibrate-scale``).
     """
 
     name = "tracknet"
     channels = 8
-    description = "small CNN trained through the tracker's alignment (preliminary weights), 8-D"
+    description = "small CNN trained through the tracker's alignment, 8-D"
 
     def __init__(self, scale: float = 1.0, weights: str | os.PathLike[str] | None = None) -> None:
         super().__init__(scale)

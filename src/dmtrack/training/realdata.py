@@ -23,15 +23,24 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.camera import PinholeCamera
 
-if TYPE_CHECKING:
-    from dmtrack.training.train import TrainOptions
+
+@dataclass
+class Pair:
+    """A training pair: grey crops, the keyframe's inverse depth, the crop camera and the true T_fk; ``var``: the
+    inverse depth's variance where it is an estimate (real data; NaN depth = none), ``None`` for exact depth."""
+
+    key_image: np.ndarray
+    frame_image: np.ndarray
+    idepth: np.ndarray
+    camera: PinholeCamera
+    T_fk: np.ndarray
+    var: np.ndarray | None = None
 
 
 @dataclass
@@ -171,11 +180,9 @@ class SequencePairs:
     def height(self) -> int:
         return self.camera.height
 
-    def sample(self, rng: np.random.Generator, crop: tuple[int, int], max_gap: int):  # noqa: ANN201
-        """A :class:`~dmtrack.training.train.Pair` (random keyframe, gap and crop; ``max_gap`` at most the one
+    def sample(self, rng: np.random.Generator, crop: tuple[int, int], max_gap: int) -> Pair:
+        """A :class:`Pair` (random keyframe, gap and crop; ``max_gap`` at most the one
         the depth was built for)."""
-        from dmtrack.training.train import Pair
-
         kf = self.keyframes[int(rng.integers(len(self.keyframes)))]
         gap = int(rng.integers(1, min(max_gap, self.max_gap) + 1))
         k = kf.index
@@ -215,24 +222,3 @@ class MixedPairs:
     def sample(self, rng: np.random.Generator, crop: tuple[int, int], max_gap: int):  # noqa: ANN201
         src = self.a if rng.random() < self.p_a else self.b
         return src.sample(rng, crop, max_gap)
-
-
-def training_pairs(opts: TrainOptions, rng: np.random.Generator, say: Callable[[str], None] | None = None) -> Any:
-    """The pair source of ``opts.data`` (synthetic pairs draw from ``rng`` first, as before real data existed, so
-    a synthetic run reproduces its weights)."""
-    from dmtrack.training.train import SyntheticPairs
-
-    synthetic = None
-    if opts.data in ("synthetic", "both"):
-        synthetic = SyntheticPairs(1000 + 100 * opts.seed, opts.n_sequences, opts.n_frames, rng)
-    if opts.data == "synthetic":
-        return synthetic
-    real = SequencePairs(
-        str(opts.data_path), opts.seed, opts.keyframe_every, opts.mapping_frames, opts.max_gap, say=say
-    )
-    if say is not None:
-        s = real.summary
-        err = "n/a" if s.rel_error is None else f"{100 * s.rel_error:.1f} %"
-        say(f"real pairs: {s.keyframes} keyframes of {opts.data_path}, median {s.points_median:.0f} depth points, "
-            f"median |d/d_sensor - 1| {err}")  # fmt: skip
-    return real if synthetic is None else MixedPairs(synthetic, real, 0.5)

@@ -67,7 +67,7 @@ from dmtrack.odometry._tracker_points import idepth_downsample_numpy, make_point
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.training.alignment import AlignParams, lm_step, pack
 from dmtrack.training.model import TrackNet, export_npz
-from dmtrack.training.realdata import training_pairs
+from dmtrack.training.realdata import MixedPairs, Pair, SequencePairs
 
 DATA_CHOICES = ("synthetic", "7scenes", "both")
 LR_SCHEDULES = ("constant", "cosine")
@@ -214,19 +214,6 @@ class TrainOptions:
 
 
 # ============================================================================================ data
-@dataclass
-class Pair:
-    """A training pair: grey crops, the keyframe's inverse depth, the crop camera and the true T_fk; ``var``: the
-    inverse depth's variance where it is an estimate (real data; NaN depth = none), ``None`` for exact depth."""
-
-    key_image: np.ndarray
-    frame_image: np.ndarray
-    idepth: np.ndarray
-    camera: PinholeCamera
-    T_fk: np.ndarray
-    var: np.ndarray | None = None
-
-
 def _sequence_config(seed: int, rng: np.random.Generator, n_frames: int) -> SyntheticConfig:
     return SyntheticConfig(
         seed=int(seed),
@@ -285,6 +272,25 @@ class SyntheticPairs:
             camera=PinholeCamera(cam.fx, cam.fy, cam.cx - x0, cam.cy - y0, cw, ch),
             T_fk=T_fk,
         )
+
+
+def training_pairs(opts: TrainOptions, rng: np.random.Generator, say: Callable[[str], None] | None = None) -> Any:
+    """The pair source of ``opts.data`` (synthetic pairs draw from ``rng`` first, as before real data existed, so
+    a synthetic run reproduces its weights)."""
+    synthetic = None
+    if opts.data in ("synthetic", "both"):
+        synthetic = SyntheticPairs(1000 + 100 * opts.seed, opts.n_sequences, opts.n_frames, rng)
+    if opts.data == "synthetic":
+        return synthetic
+    real = SequencePairs(
+        str(opts.data_path), opts.seed, opts.keyframe_every, opts.mapping_frames, opts.max_gap, say=say
+    )
+    if say is not None:
+        s = real.summary
+        err = "n/a" if s.rel_error is None else f"{100 * s.rel_error:.1f} %"
+        say(f"real pairs: {s.keyframes} keyframes of {opts.data_path}, median {s.points_median:.0f} depth points, "
+            f"median |d/d_sensor - 1| {err}")  # fmt: skip
+    return real if synthetic is None else MixedPairs(synthetic, real, 0.5)
 
 
 @dataclass

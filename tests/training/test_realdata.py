@@ -141,3 +141,22 @@ def test_shared_7scenes_pairs_have_metric_depth(shared_dir) -> None:  # noqa: AN
         ratio = np.median(mapped) / np.median(sensor[sensor > 0])
         assert 0.7 < ratio < 1.4, ratio
     assert sp.summary.rel_error is not None and sp.summary.rel_error < 0.4
+
+
+def test_intrinsics_and_cli_options_reach_the_pairs() -> None:
+    sp = SequencePairs(SYNTH, seed=0, keyframe_every=10, mapping_frames=4, max_gap=2, max_frames=10,
+                       intrinsics="300,301,160,120")  # fmt: skip
+    assert (sp.camera.fx, sp.camera.fy, sp.camera.cx, sp.camera.cy) == (300, 301, 160, 120)
+    with pytest.raises(InputError):
+        SequencePairs(SYNTH, seed=0, max_frames=10, intrinsics="1,2")
+    import argparse
+
+    from dmtrack.training.cli import add_train_parser
+
+    parser = argparse.ArgumentParser()
+    add_train_parser(parser.add_subparsers())
+    a = parser.parse_args(["train-feature", "--out", "o", "--data", "both", "--data-path", "p"])
+    assert (a.intrinsics, a.keyframe_every, a.mapping_frames) == (None, 10, 12)
+    a = parser.parse_args(["train-feature", "--out", "o", "--intrinsics", "1,2,3,4", "--keyframe-every", "5",
+                           "--mapping-frames", "7"])  # fmt: skip
+    assert (a.intrinsics, a.keyframe_every, a.mapping_frames) == ("1,2,3,4", 5, 7)

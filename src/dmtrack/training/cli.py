@@ -31,6 +31,9 @@ def cmd_train_feature(args: argparse.Namespace) -> int:
         channels=args.channels,
         data=args.data,
         data_path=args.data_path,
+        intrinsics=args.intrinsics,
+        keyframe_every=args.keyframe_every,
+        mapping_frames=args.mapping_frames,
         threads=args.threads,
         lr_schedule=args.lr_schedule,
     )
@@ -80,6 +83,12 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--data-path", metavar="DIR",
                    help="the real sequence of --data 7scenes/both, e.g. ../shared/data/7scenes-0000-0699 (never "
                    "a sequence you evaluate on)")
+    p.add_argument("--intrinsics", metavar="FX,FY,CX,CY|FILE",
+                   help="intrinsics replacing the real sequence's (as `dmtrack run --intrinsics`)")
+    p.add_argument("--keyframe-every", type=positive_int, default=10, metavar="N",
+                   help="real data: a training keyframe every N frames (default 10)")
+    p.add_argument("--mapping-frames", type=positive_int, default=12, metavar="M",
+                   help="real data: frames before a keyframe mapped into its depth (default 12)")
     p.add_argument("--lr-schedule", choices=("constant", "cosine"), default="constant",
                    help="learning rate: constant 1e-3 (default), or cosine from 1e-3 to 5e-5 over --steps")
     p.add_argument("--threads", type=positive_int, default=1, metavar="N",

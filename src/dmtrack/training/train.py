@@ -101,6 +101,8 @@ class TrainOptions:
         either with probability ½).
     data_path : str, optional
         The real sequence of ``"7scenes"`` / ``"both"`` (e.g. ``../shared/data/7scenes-0000-0699``).
+    intrinsics : str, optional
+        Intrinsics replacing the real sequence's (as ``dmtrack run --intrinsics``).
     keyframe_every, mapping_frames
         Real data: frames between two training keyframes, and frames before each mapped into its depth.
     gain : float
@@ -157,6 +159,7 @@ class TrainOptions:
     kernels: tuple[int, ...] = (5, 3)
     data: str = "synthetic"
     data_path: str | None = None
+    intrinsics: str | None = None
     keyframe_every: int = 10
     mapping_frames: int = 12
     gain: float = 64.0
@@ -283,8 +286,9 @@ def training_pairs(opts: TrainOptions, rng: np.random.Generator, say: Callable[[
     if opts.data == "synthetic":
         return synthetic
     real = SequencePairs(
-        str(opts.data_path), opts.seed, opts.keyframe_every, opts.mapping_frames, opts.max_gap, say=say
-    )
+        str(opts.data_path), opts.seed, opts.keyframe_every, opts.mapping_frames, opts.max_gap, say=say,
+        intrinsics=opts.intrinsics,
+    )  # fmt: skip
     if say is not None:
         s = real.summary
         err = "n/a" if s.rel_error is None else f"{100 * s.rel_error:.1f} %"

@@ -498,15 +498,22 @@ class DepthMap:
         if n == 0 or not s > 0.0:
             return 1.0
         rho = n / s
-        rho2 = rho * rho
-        # in place where valid, float32 × float32(ρ) as ``a[v] * rho`` computes it (a Python float is a weak
-        # scalar), without the gathered copies
-        r1, r2 = np.float32(rho), np.float32(rho2)
+        self.scale_idepth(rho)
+        return float(rho)
+
+    def scale_idepth(self, c: float, c2: float | None = None) -> None:
+        """Multiply the inverse depths of the valid pixels by ``c`` and their variances by ``c2`` (default c·c,
+        formed in float64), in place.
+
+        float32 × float32(c), as ``a[v] * c`` computes it (a Python float is a weak scalar), without the gathered
+        copies.
+        """
+        v = self.valid
+        r1, r2 = np.float32(c), np.float32(c * c if c2 is None else c2)
         np.multiply(self.idepth, r1, out=self.idepth, where=v)
         np.multiply(self.idepth_smoothed, r1, out=self.idepth_smoothed, where=v)
         np.multiply(self.idepth_var, r2, out=self.idepth_var, where=v)
         np.multiply(self.idepth_var_smoothed, r2, out=self.idepth_var_smoothed, where=v)
-        return float(rho)
 
     # ------------------------------------------------------------------------------------------ outputs
     def _tracking_mask(self) -> np.ndarray:

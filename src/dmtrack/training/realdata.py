@@ -145,8 +145,12 @@ class SequencePairs:
             sensor = np.asarray(sensor, np.float64)
             dm = DepthMap(DepthConfig())
             dm.initialize_random(frame(k), seed * 100_003 + k)
+            # LSD-SLAM's random initial inverse depth (0.5 … 1.5) is meant for a world whose scale the odometry
+            # chooses; mapped at metric ground-truth poses it must start at the scene's scale, or the depth filter
+            # rejects the observations as inconsistent
             c = 1.0 / float(np.median(sensor[have]))
-            _rescale(dm, c)
+            c32 = np.float32(c)
+            dm.scale_idepth(c, float(c32 * c32))  # variances × float32(c)·float32(c): as the packaged weights were made
             T_wk = poses[k]
             for f in range(k - mapping_frames, k):
                 T_fk = np.linalg.inv(poses[f]) @ T_wk  # type: ignore[operator]
@@ -200,17 +204,6 @@ class SequencePairs:
             T_fk=T_fk,
             var=np.ascontiguousarray(kf.var[win]),
         )
-
-
-def _rescale(dm, c: float) -> None:  # noqa: ANN001
-    """Multiply the map's inverse depth by ``c`` (its variance by c²): LSD-SLAM's random initial depth (inverse
-    depth 0.5 … 1.5) is meant for a world whose scale the odometry itself chooses; mapped at metric ground-truth
-    poses, it must start at the scene's scale or the depth filter rejects the observations as inconsistent."""
-    c32 = np.float32(c)
-    for a in (dm.idepth, dm.idepth_smoothed):
-        a *= c32
-    for a in (dm.idepth_var, dm.idepth_var_smoothed):
-        a *= c32 * c32
 
 
 class MixedPairs:

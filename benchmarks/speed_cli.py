@@ -18,6 +18,10 @@ What it measures, per feature
 
   min / median / max over the repeats are reported. The trajectory's SHA-256 must be the same in every repeat.
 
+``--busy K`` keeps K other processes busy (a pure-Python loop each) during the timed runs: the speed on a machine
+that other work shares. ``--env KEY=VALUE`` (repeatable) sets an environment variable of the timed ``dmtrack``
+processes, for A/B comparisons (e.g. ``OMP_WAIT_POLICY=active`` against dmtrack's default, passive).
+
 The references are LSD-SLAM's VO (53 fps) and DSO without threads (42 fps) on this kind of machine, 640×480,
 from ../shared/design/lsd-slam-spec.md §6. The load average is recorded: on a shared machine, compare like with like.
 """
@@ -44,6 +48,26 @@ REFERENCES_FPS = {"LSD-SLAM VO (C++)": 53.0, "DSO (no threads)": 42.0}
 def _dmtrack() -> list[str]:
     exe = Path(sys.executable).with_name("dmtrack")
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "dmtrack.cli"]
+
+
+_BUSY_LOOP = "while True:\n    pass\n"
+
+
+class Busy:
+    """K busy-loop processes while the block runs (``--busy``)."""
+
+    def __init__(self, k: int):
+        self.k = int(k)
+        self.procs: list[subprocess.Popen] = []
+
+    def __enter__(self) -> Busy:
+        self.procs = [subprocess.Popen([sys.executable, "-c", _BUSY_LOOP]) for _ in range(self.k)]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for p in self.procs:
+            p.kill()
+            p.wait()
 
 
 def run_once(args: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
@@ -74,14 +98,16 @@ def compile_seconds(sequence: Path, feature: str, tmp: Path) -> dict[str, float]
             "compile_s": statistics.median(cold) - statistics.median(warm)}
 
 
-def measure(sequence: Path, feature: str, frames: int, repeat: int, tmp: Path) -> dict:
+def measure(sequence: Path, feature: str, frames: int, repeat: int, tmp: Path, env: dict[str, str] | None = None,
+            busy: int = 0) -> dict:
     out = tmp / f"run-{feature}"
     cmd = [*_dmtrack(), "run", str(sequence), "--feature", feature, "--max-frames", str(frames), "--out", str(out)]
     run_once([*_dmtrack(), "run", str(sequence), "--feature", feature, "--max-frames", "5", "--out",
               str(tmp / "warm")])  # numba's cache is warm before anything is timed
     walls, peaks, loop_fps, hashes = [], [], [], set()
     for _ in range(repeat):
-        wall, peak = run_once(cmd)
+        with Busy(busy):
+            wall, peak = run_once(cmd, env)
         metrics = json.loads((out / "metrics.json").read_text())
         n = metrics["processed_frames"]
         walls.append(n / wall)
@@ -106,8 +132,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=700)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-compile", action="store_true", help="skip the cold-compile measurement")
+    ap.add_argument("--busy", type=int, default=0, help="other processes kept busy during the timed runs")
+    ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                    help="environment variable of the timed dmtrack processes (repeatable)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "speed_cli.json")
     a = ap.parse_args(argv)
+    extra = {}
+    for item in a.env:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            ap.error(f"--env {item!r}: expected KEY=VALUE")
+        extra[key] = value
+    env = dict(os.environ, **extra) if extra else None
     if not a.sequence.exists():
         raise SystemExit(f"sequence not found: {a.sequence} (the shared data; pass --sequence)")
     result: dict = {
@@ -116,12 +152,14 @@ def main(argv: list[str] | None = None) -> int:
                     "python": platform.python_version()},
         "load_before": os.getloadavg(),
         "references_fps": REFERENCES_FPS,
+        "busy_processes": a.busy,
+        "env": extra,
         "features": {},
     }
     with tempfile.TemporaryDirectory(prefix="dmtrack-speed-") as td:
         tmp = Path(td)
         for feature in [f.strip() for f in a.features.split(",") if f.strip()]:
-            r = measure(a.sequence, feature, a.frames, a.repeat, tmp)
+            r = measure(a.sequence, feature, a.frames, a.repeat, tmp, env, a.busy)
             if not a.no_compile:
                 r["compile"] = compile_seconds(a.sequence, feature, tmp)
             result["features"][feature] = r

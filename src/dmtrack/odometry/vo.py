@@ -40,7 +40,8 @@ makes each frame wait for its own mapping (it shows the map after the frame).
 Threads: inside tracking and mapping the numba kernels can use several threads (``parallel``, ``threads``):
 the tracker's point blocks and the depth map's pixel rows are independent and every sum is formed per fixed
 block and combined in order, so the results are byte-identical for any thread count. On a machine whose cores
-are busy with other work, one thread (``threads=1`` or ``NUMBA_NUM_THREADS=1``) can be faster.
+are busy with other work the threads wait passively (``import dmtrack`` sets ``OMP_WAIT_POLICY=PASSIVE`` unless the
+user set it); there one thread (``threads=1`` or ``NUMBA_NUM_THREADS=1``) can still be faster.
 
 Frame poses: T_wc = S_wk · T_fk⁻¹ reduced to SE(3) (rotation without the scale, translation in world units);
 the world unit is the first keyframe's (mean inverse depth 1), up to the drift of the monocular scale.

@@ -24,13 +24,13 @@ FEATURES = ("rgb", "bitplanes")
 # runs FEATURES into argv[1]/<feature> and prints numba's cache statistics of the tracker and depth kernels
 _SCRIPT = f"""
 import json, sys
-from dmtrack.odometry._depth_update import _observe_parallel
+from dmtrack.odometry._depth_update import _observe_rows
 from dmtrack.odometry._tracker_residuals import eval_pass_parallel
 from dmtrack.pipeline import run_to_directory
 for feature in {FEATURES!r}:
     run_to_directory({SEQUENCE!r}, sys.argv[1] + "/" + feature, feature=feature, seed=1, depth_images=False,
                      pointcloud=False)
-stats = [k.stats for k in (eval_pass_parallel, _observe_parallel)]
+stats = [k.stats for k in (eval_pass_parallel, _observe_rows)]
 print(json.dumps({{"hits": sum(sum(s.cache_hits.values()) for s in stats),
                   "misses": sum(sum(s.cache_misses.values()) for s in stats)}}))
 """

@@ -259,7 +259,7 @@ def test_single_channel_build_is_the_three_dimensional_build_bit_for_bit():
     """One channel runs a build of its own ((H, W) maps, the multichannel branches pruned at compile time): the
     line stereo and a whole observe pass give the bytes of the general (H, W, 1) build."""
     from dmtrack.odometry._depth_common import N_COUNTS
-    from dmtrack.odometry._depth_update import _observe_parallel, observe_numba
+    from dmtrack.odometry._depth_update import _observe_rows, observe_numba
 
     cam = _camera(96, 64)
     kf, z0 = _frame(0, cam, np.eye(4))
@@ -286,8 +286,8 @@ def test_single_channel_build_is_the_three_dimensional_build_bit_for_bit():
     counts2 = observe_numba(two, lv.feat, lv.gx, lv.gy, lv.max_grad, fr.levels[0].feat, good, geo, prm, 1.0, 4, 1.0)
     three = tuple(x.copy() for x in dm.state)
     counts3 = np.zeros((64, N_COUNTS), np.int64)
-    _observe_parallel(*three, lv.feat, lv.gx, lv.gy, lv.max_grad, fr.levels[0].feat, good, True, geo, prm, 1.0, 4,
-                      1.0, counts3)  # fmt: skip
+    _observe_rows(0, 1, *three, lv.feat, lv.gx, lv.gy, lv.max_grad, fr.levels[0].feat, good, True, geo, prm, 1.0, 4,
+                  1.0, counts3)  # fmt: skip
     assert lv.feat.ndim == 3 and counts2[4] > 100  # updated
     assert counts2.tobytes() == counts3.sum(axis=0).tobytes()
     for x, y in zip(two, three, strict=True):

@@ -49,8 +49,9 @@ Conventions
 
 from __future__ import annotations
 
-import contextlib
-import types
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -224,41 +225,48 @@ def stereo_geometry(
 
 
 # ============================================================================== numba helpers
-def _schedule(parallel: bool):  # noqa: ANN202
-    """Context for a kernel call: dynamic scheduling (chunks of one ``prange`` iteration) for the parallel
-    builds — a thread that the OS delays does not hold the others up — and nothing for the serial ones."""
-    return numba.parallel_chunksize(1) if parallel else contextlib.nullcontext()
+_ROW_POOL: tuple[int, int, ThreadPoolExecutor] | None = None  # (pid that made it, its threads, the pool)
+_ROW_POOL_LOCK = threading.Lock()
 
 
-@contextlib.contextmanager
-def _one_thread():  # noqa: ANN202
-    """Run numba's parallel kernels on one thread (in the calling thread) inside the block."""
-    prev = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(prev)
+def _row_pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of row threads, with at least ``workers`` threads (made again after a fork: a forked
+    child has none of its parent's threads)."""
+    global _ROW_POOL
+    with _ROW_POOL_LOCK:
+        pid = os.getpid()
+        if _ROW_POOL is None or _ROW_POOL[0] != pid or _ROW_POOL[1] < workers:
+            if _ROW_POOL is not None and _ROW_POOL[0] == pid:
+                _ROW_POOL[2].shutdown(wait=False)  # its running tasks finish; new ones go to the larger pool
+            _ROW_POOL = (pid, workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="dmtrack-rows"))
+        return _ROW_POOL[2]
 
 
-def _variant(fn, suffix: str):
-    """A copy of the python function ``fn`` named ``fn.__name__ + suffix``.
+def run_rows(fn, args: tuple, parallel: bool) -> None:  # noqa: ANN001
+    """``fn(first, step, *args)`` over interleaved row sets: one call ``fn(0, 1, …)`` serially, or with
+    ``parallel`` one call ``fn(t, n, …)`` per thread t = 0 … n − 1 (n = numba's thread count of the calling thread;
+    t = 0 on the calling thread, the others on the pool's threads; ``fn`` is a ``nogil`` numba kernel).
 
-    numba's on-disk cache is keyed by the function's qualified name and first line, not by the compile flags:
-    a serial and a ``parallel=True`` build of the *same* function would share one cache entry, and whichever
-    was compiled first would be loaded for both (the parallel build silently running serially). Each build
-    therefore gets its own copy with its own name.
+    The row kernels (observe, regularize, fill holes) write only their own rows and read only what no row writes, so
+    the result is byte-identical for every n. Python threads rather than a ``prange``: numba's parallel build of a
+    kernel re-optimised the whole row function it calls (2–3.5 s more compilation per kernel, issue 14), and these
+    kernels run once per frame, where a pool hand-over (tens of µs) is negligible. An exception in any thread is
+    raised here after all threads have finished.
     """
-    g = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + suffix, fn.__defaults__, fn.__closure__)
-    g.__qualname__ = fn.__qualname__ + suffix
-    g.__doc__ = fn.__doc__
-    return g
+    n = numba.get_num_threads() if parallel else 1
+    if n <= 1:
+        fn(0, 1, *args)
+        return
+    futures = [_row_pool(n - 1).submit(fn, t, n, *args) for t in range(1, n)]
+    try:
+        fn(0, n, *args)
+    finally:
+        errors = [f.exception() for f in futures]
+    for e in errors:
+        if e is not None:
+            raise e
 
 
-#: Row chunks of the row-parallel kernels (observe, regularize, fill holes): chunk c takes every
-#: ROW_CHUNKS-th row starting at c. Pixels (rows) are independent, so results do not depend on it nor on the
-#: thread count; it only balances the work of ``prange``'s static schedule.
-ROW_CHUNKS = 32
 _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 # small helpers are inlined at numba-IR level: LLVM does not inline across separately compiled (cached)
 # numba functions, and a call per bilinear sample costs ~3x the sample itself

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import prange
 
 from dmtrack.odometry._depth_common import (
     _JIT,
@@ -21,10 +20,8 @@ from dmtrack.odometry._depth_common import (
     P_VAL_SUM_CREATE,
     P_VAL_SUM_UNBL,
     P_VAR_INIT,
-    ROW_CHUNKS,
-    _schedule,
     _unzero,
-    _variant,
+    run_rows,
 )
 
 #: ``DIFF_FAC_SMOOTHING`` (1 in LSD-SLAM): factor of the squared difference in the neighbour consistency test.
@@ -52,7 +49,8 @@ def _reg_term(vr, di, vi, val, d0, v0, c, fac, sv, ss, si, so, sk):  # pragma: n
 
 @numba.njit(**_JIT)
 def _regularize_rows(
-    chunk,
+    first,
+    step,
     valid,
     blacklisted,
     validity,
@@ -65,12 +63,13 @@ def _regularize_rows(
     validity_th,
     reg_dist_var,
 ):  # pragma: no cover - compiled
-    """Regularisation of the rows 2 + ``chunk``, 2 + ``chunk`` + ROW_CHUNKS, … (see :func:`_regularize_impl`).
-
-    A function of its own, called from the ``prange`` of :func:`_regularize_impl` rather than that loop's body
-    (as :func:`dmtrack.odometry._depth_update._observe_rows`): numba's parallel passes (copy propagation over the
-    loop body) took 7 of the 8 s that the kernel's parallel build took to compile when the body held the 25
-    IR-inlined neighbour terms."""
+    """Row-vectorised regularisation of the rows 2 + ``first``, 2 + ``first`` + ``step``, … (one call per thread,
+    :func:`~dmtrack.odometry._depth_common.run_rows`): for each row, five branch-free passes over the columns (one
+    per neighbour row dy, its five column offsets dx unrolled) accumulate into per-column float32 buffers, in the
+    order (dy, dx) of LSD-SLAM's loops (a pixel's sums are those of 25 passes, one per offset, with a fifth of their
+    buffer traffic); then the per-pixel decisions. A row without valid pixels is skipped (it produces nothing).
+    Rows only read ``valid_read`` (a copy of ``valid``), ``idepth``, ``var`` and ``validity``, which are not
+    written, so rows are independent."""
     h, w = valid.shape
     zero = np.float32(0.0)
     fac = np.float32(DIFF_FAC_SMOOTHING)
@@ -80,7 +79,7 @@ def _regularize_rows(
     acc_v = np.empty(w, np.float32)
     n_occ = np.empty(w, np.float32)
     n_ok = np.empty(w, np.float32)
-    for y in range(2 + chunk, h - 2, ROW_CHUNKS):
+    for y in range(2 + first, h - 2, step):
         x0 = 2
         while x0 < w - 2 and not valid_read[y, x0]:
             x0 += 1
@@ -150,89 +149,57 @@ def _regularize_rows(
             var_s[y, x] = 1.0 / si
 
 
-def _regularize_impl(
-    valid,
-    blacklisted,
-    validity,
-    idepth,
-    var,
-    idepth_s,
-    var_s,
-    valid_read,
-    remove_occlusions,
-    validity_th,
-    reg_dist_var,
-):  # pragma: no cover - compiled
-    """Row-vectorised regularisation: for each row, five branch-free passes over the columns (one per neighbour
-    row dy, its five column offsets dx unrolled) accumulate into per-column float32 buffers, in the order
-    (dy, dx) of LSD-SLAM's loops (a pixel's sums are those of 25 passes, one per offset, with a fifth of their
-    buffer traffic); then the per-pixel decisions. A row without valid pixels is skipped (it produces nothing).
-    Rows only read ``valid_read`` (a copy of ``valid``), ``idepth``, ``var`` and ``validity``, which are not
-    written, so rows are independent (interleaved row chunks, ``prange`` in the parallel build)."""
+@numba.njit(**_JIT)
+def _fill_prepare(valid, validity, valid_read, integral):  # pragma: no cover - compiled
+    """Hole filling, the sequential part: ``valid_read`` = ``valid`` and the integral image of the validity of
+    valid pixels, integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x."""
     h, w = valid.shape
-    for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
+    for y in range(h):
         for x in range(w):
             valid_read[y, x] = valid[y, x]
-    # the prange index is unsigned inside the parallel build: int64 keeps one signature of _regularize_rows
-    for chunk in prange(ROW_CHUNKS):
-        _regularize_rows(
-            np.int64(chunk), valid, blacklisted, validity, idepth, var, idepth_s, var_s, valid_read,
-            remove_occlusions, validity_th, reg_dist_var,
-        )  # fmt: skip
-
-
-_regularize_serial = numba.njit(**_JIT)(_variant(_regularize_impl, "_serial"))
-_regularize_parallel = numba.njit(parallel=True, **_JIT)(_variant(_regularize_impl, "_parallel"))
-
-
-def _fill_holes_impl(
-    valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, mg, valid_read, integral, prm
-):  # pragma: no cover - compiled
-    """Hole filling. The integral image is sequential; the fill reads only ``valid_read`` pixels (never
-    written: only invalid pixels are filled) and the integral image, so rows are independent."""
-    h, w = valid.shape
-    for y in range(h):  # an explicit loop: an array expression would become a (chunked) parfor
-        for x in range(w):
-            valid_read[y, x] = valid[y, x]
-    # integral image of the validity of valid pixels: integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x
     for y in range(h):
         row = 0.0
         for x in range(w):
             if valid[y, x]:
                 row += validity[y, x]
             integral[y + 1, x + 1] = integral[y, x + 1] + row
+
+
+@numba.njit(**_JIT)
+def _fill_rows(
+    first, step, valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, mg, valid_read, integral, prm
+):  # pragma: no cover - compiled
+    """Hole filling of the rows 3 + ``first``, 3 + ``first`` + ``step``, … (one call per thread). The fill reads
+    only ``valid_read`` pixels (never written: only invalid pixels are filled) and the integral image, so rows are
+    independent."""
+    h, w = valid.shape
     min_grad = prm[P_MIN_GRAD]
     min_bl = prm[P_MIN_BLACKLIST]
-    for chunk in prange(ROW_CHUNKS):
-        for y in range(3 + chunk, h - 2, ROW_CHUNKS):
-            for x in range(3, w - 2):
-                if valid_read[y, x]:
-                    continue
-                if mg[y, x] < min_grad:
-                    continue
-                val = integral[y + 3, x + 3] - integral[y - 2, x + 3] - integral[y + 3, x - 2] + integral[y - 2, x - 2]
-                if (blacklisted[y, x] >= min_bl and val > prm[P_VAL_SUM_CREATE]) or val > prm[P_VAL_SUM_UNBL]:
-                    s = 0.0
-                    sivar = 0.0
-                    for yy in range(y - 2, y + 3):
-                        for xx in range(x - 2, x + 3):
-                            if not valid_read[yy, xx]:
-                                continue
-                            iv = 1.0 / np.float64(var[yy, xx])
-                            s += np.float64(idepth[yy, xx]) * iv
-                            sivar += iv
-                    valid[y, x] = True
-                    blacklisted[y, x] = 0
-                    next_id[y, x] = 0
-                    validity[y, x] = 0.0
-                    idepth[y, x] = _unzero(s / sivar)
-                    var[y, x] = prm[P_VAR_INIT]
-                    idepth_s[y, x] = -1.0
-                    var_s[y, x] = -1.0
-
-
-_fill_holes_serial = numba.njit(**_JIT)(_variant(_fill_holes_impl, "_serial"))
-_fill_holes_parallel = numba.njit(parallel=True, **_JIT)(_variant(_fill_holes_impl, "_parallel"))
+    for y in range(3 + first, h - 2, step):
+        for x in range(3, w - 2):
+            if valid_read[y, x]:
+                continue
+            if mg[y, x] < min_grad:
+                continue
+            val = integral[y + 3, x + 3] - integral[y - 2, x + 3] - integral[y + 3, x - 2] + integral[y - 2, x - 2]
+            if (blacklisted[y, x] >= min_bl and val > prm[P_VAL_SUM_CREATE]) or val > prm[P_VAL_SUM_UNBL]:
+                s = 0.0
+                sivar = 0.0
+                for yy in range(y - 2, y + 3):
+                    for xx in range(x - 2, x + 3):
+                        if not valid_read[yy, xx]:
+                            continue
+                        iv = 1.0 / np.float64(var[yy, xx])
+                        s += np.float64(idepth[yy, xx]) * iv
+                        sivar += iv
+                valid[y, x] = True
+                blacklisted[y, x] = 0
+                next_id[y, x] = 0
+                validity[y, x] = 0.0
+                idepth[y, x] = _unzero(s / sivar)
+                var[y, x] = prm[P_VAR_INIT]
+                idepth_s[y, x] = -1.0
+                var_s[y, x] = -1.0
 
 
 def regularize_numba(
@@ -246,26 +213,15 @@ def regularize_numba(
     """``regularizeDepthMap`` (radius 2) in place on ``state`` (see :func:`regularize_reference`).
 
     Float32 arithmetic (as LSD-SLAM); ``scratch`` is an optional (H, W) bool work array. ``parallel``: rows
-    over threads (identical results).
+    over threads (:func:`~dmtrack.odometry._depth_common.run_rows`; identical results).
     """
     valid, blacklisted, _next_id, validity, idepth, var, idepth_s, var_s = state
     if scratch is None:
         scratch = np.empty(valid.shape, np.bool_)
-    fn = _regularize_parallel if parallel else _regularize_serial
-    with _schedule(parallel):
-        fn(
-            valid,
-            blacklisted,
-            validity,
-            idepth,
-            var,
-            idepth_s,
-            var_s,
-            scratch,
-            bool(remove_occlusions),
-            np.float32(validity_th),
-            float(reg_dist_var),
-        )
+    np.copyto(scratch, valid)  # valid_read: the rows read the validity as it was before any row wrote
+    args = (valid, blacklisted, validity, idepth, var, idepth_s, var_s, scratch, bool(remove_occlusions),
+            np.float32(validity_th), float(reg_dist_var))  # fmt: skip
+    run_rows(_regularize_rows, args, parallel)
 
 
 def fill_holes_numba(
@@ -285,9 +241,8 @@ def fill_holes_numba(
         scratch = np.empty((h, w), np.bool_)
     if integral is None:
         integral = np.zeros((h + 1, w + 1), np.float64)
-    fn = _fill_holes_parallel if parallel else _fill_holes_serial
-    with _schedule(parallel):
-        fn(*state, max_grad, scratch, integral, prm)
+    _fill_prepare(state[0], state[3], scratch, integral)
+    run_rows(_fill_rows, (*state, max_grad, scratch, integral, prm), parallel)
 
 
 # ============================================================================== numpy references

@@ -15,7 +15,6 @@ import math
 
 import numba
 import numpy as np
-from numba import prange
 
 from dmtrack.odometry._depth_common import (
     _JIT,
@@ -48,11 +47,8 @@ from dmtrack.odometry._depth_common import (
     P_VAL_INIT_OBS,
     P_VAL_MAX,
     P_VAL_MAX_VAR,
-    ROW_CHUNKS,
-    _one_thread,
-    _schedule,
     _unzero,
-    _variant,
+    run_rows,
 )
 from dmtrack.odometry._epipolar_stereo import _epl_check, _line_stereo, epl_check_reference, line_stereo_reference
 from dmtrack.odometry.frame import gradients
@@ -67,7 +63,8 @@ DIFF_FAC_OBSERVE = 1.0
 # ============================================================================== numba kernel
 @numba.njit(**_JIT)
 def _observe_rows(
-    chunk,
+    first,
+    step,
     valid,
     blacklisted,
     next_id,
@@ -90,13 +87,11 @@ def _observe_rows(
     skip_ratio,
     counts,
 ):  # pragma: no cover - compiled
-    """observeDepth of the rows 3 + ``chunk``, 3 + ``chunk`` + ROW_CHUNKS, … (in place; counters per row).
+    """observeDepth of the rows 3 + ``first``, 3 + ``first`` + ``step``, … (in place; counters per row).
 
-    A function of its own, called from the ``prange`` of :func:`_observe_impl`, rather than that loop's body:
-    numba's parallel passes then see a one-line loop (they took two thirds of a 36 s compile when the body held the
-    inlined line stereo), and ``kf.ndim`` is a constant here, so the single-channel build — (H, W) maps, see
-    :func:`observe_numba` — is compiled without the multichannel code. The line stereo is inlined by LLVM
-    (``_JIT_LLVM_INLINE``).
+    Called once per thread by :func:`~dmtrack.odometry._depth_common.run_rows` (rows are independent). ``kf.ndim``
+    is a constant here, so the single-channel build — (H, W) maps, see :func:`observe_numba` — is compiled without
+    the multichannel code. The line stereo is inlined by LLVM (``_JIT_LLVM_INLINE``).
     """
     h, w = valid.shape
     if kf.ndim == 2:  # one channel as (H, W) (see _line_stereo)
@@ -121,7 +116,7 @@ def _observe_rows(
     else:
         gxa = kf_gx
         gya = kf_gy
-    for y in range(3 + chunk, h - 3, ROW_CHUNKS):
+    for y in range(3 + first, h - 3, step):
         for x in range(3, w - 3):
             has = valid[y, x]
             mg = kf_mg[y, x]
@@ -248,42 +243,6 @@ def _observe_rows(
                         next_id[y, x] = int(frame_id + inc)
 
 
-def _observe_impl(
-    valid,
-    blacklisted,
-    next_id,
-    validity,
-    idepth,
-    var,
-    idepth_s,
-    var_s,
-    kf,
-    kf_gx,
-    kf_gy,
-    kf_mg,
-    ref,
-    good,
-    use_good,
-    geo,
-    prm,
-    cscale,
-    frame_id,
-    skip_ratio,
-    counts,
-):  # pragma: no cover - compiled
-    # rows are independent; chunk c takes rows 3 + c, 3 + c + ROW_CHUNKS, … (interleaved, so that the
-    # schedule of prange gives every thread a similar share of the textured rows). The prange index is unsigned
-    # inside the parallel build: int64 keeps one compiled signature of _observe_rows (and its arithmetic signed).
-    for chunk in prange(ROW_CHUNKS):
-        _observe_rows(
-            np.int64(chunk), valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s, kf, kf_gx, kf_gy,
-            kf_mg, ref, good, use_good, geo, prm, cscale, frame_id, skip_ratio, counts,
-        )  # fmt: skip
-
-
-_observe_parallel = numba.njit(parallel=True, **_JIT)(_variant(_observe_impl, "_parallel"))
-
-
 def observe_numba(
     state: tuple[np.ndarray, ...],
     kf: np.ndarray,
@@ -302,7 +261,8 @@ def observe_numba(
     """observeDepth over the keyframe (in place on ``state``); returns the (N_COUNTS,) int64 counters.
 
     ``state`` = (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s). Rows are independent,
-    so ``parallel=True`` (numba prange over rows) gives byte-identical results. ``kf_gx``, ``kf_gy`` may be
+    so ``parallel=True`` (rows over threads, :func:`~dmtrack.odometry._depth_common.run_rows`) gives byte-identical
+    results. ``kf_gx``, ``kf_gy`` may be
     ``None``: for N > 1 the kernel then forms each keyframe pixel's gradients from ``kf`` itself (the same bits,
     without two (H, W, N) maps: 314 MB for 128-channel dense SIFT at 640×480).
     """
@@ -317,27 +277,11 @@ def observe_numba(
     counts = np.zeros((h, N_COUNTS), np.int64)
     use_good = good is not None
     g = good if use_good else np.ones((1, 1), np.bool_)
-    # one compiled kernel for both: the serial call runs the parallel build on one thread, so serial and
-    # threaded updates are the same machine code (the fast-math channel loops it calls may otherwise be
-    # vectorised with different reduction orders in two separately compiled kernels)
-    fn = _observe_parallel
-    with _schedule(parallel) if parallel else _one_thread():
-        fn(
-            *state,
-            kf,
-            kf_gx,
-            kf_gy,
-            kf_mg,
-            ref,
-            g,
-            use_good,
-            geo,
-            prm,
-            float(cscale),
-            int(frame_id),
-            float(skip_ratio),
-            counts,
-        )
+    # one compiled row kernel for any thread count: serial and threaded updates run the same machine code (the
+    # fast-math channel loops it calls could otherwise be vectorised with different reduction orders in two builds)
+    args = (*state, kf, kf_gx, kf_gy, kf_mg, ref, g, use_good, geo, prm, float(cscale), int(frame_id),
+            float(skip_ratio), counts)  # fmt: skip
+    run_rows(_observe_rows, args, parallel)
     return counts.sum(axis=0)
 
 

@@ -43,8 +43,9 @@ Remaining differences, all deliberate:
 Typical cost at 640×480 grey (7-Scenes, numba, one core, ``benchmarks/profile_mapping.py``): ≈ 13 ms per
 :meth:`DepthMap.update` (observe ≈ 9.5 ms, ≈ 0.23 µs per stereo search, regularize ≈ 2.6 ms, fill holes
 ≈ 1 ms), ≈ 19 ms per :meth:`DepthMap.create_keyframe`. With ``parallel=True`` observe, fill holes and
-regularize run over interleaved row chunks on all numba threads (dynamic schedule); on two idle cores observe
-takes ≈ 0.5× and regularize ≈ 0.6× of the one-core time.
+regularize split their rows into interleaved sets, one per numba thread, each run by a nogil kernel on a thread of a
+small pool (:func:`~dmtrack.odometry._depth_common.run_rows`); on two idle cores observe takes ≈ 0.5–0.7× and
+regularize ≈ 0.6× of the one-core time.
 """
 
 from __future__ import annotations
@@ -91,8 +92,9 @@ class DepthMap:
     use_numba : bool
         Use the numba kernels (default) or the plain numpy/python references (slow; small images only).
     parallel : bool
-        Run observe, fill holes and regularize with numba ``prange`` over (interleaved chunks of) rows; pixels
-        are independent, so results are identical either way.
+        Run observe, fill holes and regularize over interleaved row sets on numba's thread count of threads
+        (:func:`~dmtrack.odometry._depth_common.run_rows`); pixels are independent, so results are identical either
+        way.
 
     Attributes
     ----------

@@ -18,10 +18,11 @@ sees the other's drift. For every keyframe k (every ``--keyframe-every`` frames)
    starts from the last frame's estimate: one frame of motion to recover), or with ``--init gt`` at the true pose
    itself (does the cost's optimum lie at the truth, whatever the basin?).
 
-Two maps per feature: ``own`` (the feature's own stereo: both stages of the feature) and ``grey`` (grey's stereo;
-the feature only tracks). The error of a tracked frame is the angle of R_gtᵀ R_est (degrees) and ‖t_est − t_gt‖
-as a fraction of the frame's true displacement from the keyframe. Printed: medians over frames and seeds, the
-map's mapped pixel count, and its median |d / d_grey − 1| against grey's map where both have depth.
+Two maps per feature (one for grey itself): ``own`` (the feature's own stereo: both stages of the feature) and
+``grey`` (grey's stereo; the feature only tracks). The error of a tracked frame is the angle of R_gtᵀ R_est
+(degrees) and ‖t_est − t_gt‖ as a fraction of the frame's true displacement from the keyframe. Printed: medians over
+frames and seeds, the map's mapped pixel count, and its median |d / d_grey − 1| against grey's map where both have
+depth.
 
 Reading it: a feature that tracks as well as grey on grey's map but worse on its own map loses in its stereo; one
 that is worse on both loses in its tracking.
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> dict:
             frames = seq.frames(name, feat, levels)
             tracker = Tracker(cfg.tracker, use_numba=True, parallel=False, channel_cost=cfg.channel_cost,
                               energy_channels=cfg.energy_channels, noise_energy_channels=cfg.noise_energy_channels)
-            for source in ("own", "grey"):
+            for source in ("own", "grey") if name != "gray" else ("own",):  # grey's own map is grey's map
                 rot, trans, counts, depth_dev, gaps = [], [], [], [], []
                 for s in seeds:
                     for k in kfs:

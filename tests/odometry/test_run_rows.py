@@ -59,8 +59,10 @@ def test_an_error_in_a_pool_thread_is_raised_after_all_threads_finished() -> Non
         numba.set_num_threads(prev)
 
 
-def test_a_forked_process_makes_its_own_pool(monkeypatch) -> None:
-    pool = _depth_common._row_pool(1)
-    assert _depth_common._row_pool(1) is pool
+def test_one_pool_per_process_and_a_new_one_after_a_fork(monkeypatch) -> None:
+    pool = _depth_common._row_pool()
+    assert _depth_common._row_pool() is pool  # never replaced in a process (no submit to a shut-down pool)
     monkeypatch.setattr(_depth_common.os, "getpid", lambda: -1)  # as in a child after fork
-    assert _depth_common._row_pool(1) is not pool
+    child = _depth_common._row_pool()
+    assert child is not pool
+    assert child.submit(sum, (1, 2)).result(timeout=60) == 3

@@ -225,21 +225,21 @@ def stereo_geometry(
 
 
 # ============================================================================== numba helpers
-_ROW_POOL: tuple[int, int, ThreadPoolExecutor] | None = None  # (pid that made it, its threads, the pool)
+_ROW_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (pid that made it, the pool)
 _ROW_POOL_LOCK = threading.Lock()
 
 
-def _row_pool(workers: int) -> ThreadPoolExecutor:
-    """The process's pool of row threads, with at least ``workers`` threads (made again after a fork: a forked
-    child has none of its parent's threads)."""
+def _row_pool() -> ThreadPoolExecutor:
+    """The process's pool of row threads: numba's largest thread count − 1 of them, started as needed (made again
+    after a fork: a forked child has none of its parent's threads). Never replaced within a process, so a caller
+    never submits to a pool that another thread shut down."""
     global _ROW_POOL
     with _ROW_POOL_LOCK:
         pid = os.getpid()
-        if _ROW_POOL is None or _ROW_POOL[0] != pid or _ROW_POOL[1] < workers:
-            if _ROW_POOL is not None and _ROW_POOL[0] == pid:
-                _ROW_POOL[2].shutdown(wait=False)  # its running tasks finish; new ones go to the larger pool
-            _ROW_POOL = (pid, workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="dmtrack-rows"))
-        return _ROW_POOL[2]
+        if _ROW_POOL is None or _ROW_POOL[0] != pid:
+            workers = max(1, numba.config.NUMBA_NUM_THREADS - 1)
+            _ROW_POOL = (pid, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="dmtrack-rows"))
+        return _ROW_POOL[1]
 
 
 def run_rows(fn, args: tuple, parallel: bool) -> None:  # noqa: ANN001
@@ -257,7 +257,8 @@ def run_rows(fn, args: tuple, parallel: bool) -> None:  # noqa: ANN001
     if n <= 1:
         fn(0, 1, *args)
         return
-    futures = [_row_pool(n - 1).submit(fn, t, n, *args) for t in range(1, n)]
+    pool = _row_pool()
+    futures = [pool.submit(fn, t, n, *args) for t in range(1, n)]
     try:
         fn(0, n, *args)
     finally:

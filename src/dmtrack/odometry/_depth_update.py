@@ -262,9 +262,8 @@ def observe_numba(
 
     ``state`` = (valid, blacklisted, next_id, validity, idepth, var, idepth_s, var_s). Rows are independent,
     so ``parallel=True`` (rows over threads, :func:`~dmtrack.odometry._depth_common.run_rows`) gives byte-identical
-    results. ``kf_gx``, ``kf_gy`` may be
-    ``None``: for N > 1 the kernel then forms each keyframe pixel's gradients from ``kf`` itself (the same bits,
-    without two (H, W, N) maps: 314 MB for 128-channel dense SIFT at 640×480).
+    results. ``kf_gx``, ``kf_gy`` may be ``None``: for N > 1 the kernel then forms each keyframe pixel's gradients
+    from ``kf`` itself (the same bits, without two (H, W, N) maps: 314 MB for 128-channel dense SIFT at 640×480).
     """
     h = state[0].shape[0]
     if kf_gx is None or kf_gy is None:

@@ -233,7 +233,11 @@ def _is_float(s: str) -> bool:
 def _check_rotations(R: np.ndarray, path: Path, linenos: np.ndarray) -> None:
     with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308 overflow: not a rotation either way
         err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
-        det = np.linalg.det(R)
+        # the 3×3 cofactor expansion, not np.linalg.det: its LU divides by a pivot, which warns ("divide by zero")
+        # on a subnormal entry such as 1e-320 in an otherwise exact rotation
+        det = (R[:, 0, 0] * (R[:, 1, 1] * R[:, 2, 2] - R[:, 1, 2] * R[:, 2, 1])
+               - R[:, 0, 1] * (R[:, 1, 0] * R[:, 2, 2] - R[:, 1, 2] * R[:, 2, 0])
+               + R[:, 0, 2] * (R[:, 1, 0] * R[:, 2, 1] - R[:, 1, 1] * R[:, 2, 0]))  # fmt: skip
     err = np.where(np.isfinite(err), err, np.inf)
     bad = (err > _ROTATION_TOL) | (det < 0)
     if bad.any():

@@ -50,8 +50,9 @@ SEQUENCES = {
 
 
 def _rot_deg(R: np.ndarray) -> float:
-    c = (np.trace(R) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    from dmtrack.geometry.lie import rotation_angle
+
+    return float(np.degrees(rotation_angle(R)))
 
 
 class Sequence:

@@ -10,26 +10,14 @@ Rotation needs no scale alignment.
 import sys
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-
-def load(path):
-    rows = np.loadtxt(path, comments="#")
-    out = []
-    for r in rows:
-        T = np.eye(4)
-        T[:3, :3] = Rotation.from_quat(r[4:8]).as_matrix()
-        T[:3, 3] = r[1:4]
-        out.append(T)
-    return out
-
+from dmtrack.geometry.lie import rotation_angle
+from dmtrack.io.trajectory import read_tum
 
 for run in sys.argv[1:]:
-    E, G = load(f"{run}/trajectory.txt"), load(f"{run}/groundtruth.txt")
-    errs = []
-    for i in range(1, len(E)):
-        d = np.linalg.inv(np.linalg.inv(G[i - 1]) @ G[i]) @ (np.linalg.inv(E[i - 1]) @ E[i])
-        errs.append(np.degrees(np.linalg.norm(Rotation.from_matrix(d[:3, :3]).as_rotvec())))
-    errs = np.array(errs)
+    E, G = read_tum(f"{run}/trajectory.txt").poses, read_tum(f"{run}/groundtruth.txt").poses
+    rel_e = np.linalg.inv(E[:-1]) @ E[1:]
+    rel_g = np.linalg.inv(G[:-1]) @ G[1:]
+    errs = np.degrees(rotation_angle((np.linalg.inv(rel_g) @ rel_e)[:, :3, :3]))
     print(run, " ".join(f"{e:.2f}" for e in errs))
     print(f"  sum {errs.sum():.2f}  sum over frames 10+ {errs[10:].sum():.2f}  median {np.median(errs):.3f}")

@@ -250,8 +250,8 @@ def run_rows(fn, args: tuple, parallel: bool) -> None:  # noqa: ANN001
     The row kernels (observe, regularize, fill holes) write only their own rows and read only what no row writes, so
     the result is byte-identical for every n. Python threads rather than a ``prange``: numba's parallel build of a
     kernel re-optimised the whole row function it calls (2–3.5 s more compilation per kernel, issue 14), and these
-    kernels run once per frame, where a pool hand-over (tens of µs) is negligible. An exception in any thread is
-    raised here after all threads have finished.
+    kernels run once per frame, where a pool hand-over (about 0.1 ms measured with the other core busy) is small. An
+    exception in any thread is raised here after all threads have finished.
     """
     n = numba.get_num_threads() if parallel else 1
     if n <= 1:

@@ -150,13 +150,10 @@ def _regularize_rows(
 
 
 @numba.njit(**_JIT)
-def _fill_prepare(valid, validity, valid_read, integral):  # pragma: no cover - compiled
-    """Hole filling, the sequential part: ``valid_read`` = ``valid`` and the integral image of the validity of
-    valid pixels, integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x."""
+def _fill_integral(valid, validity, integral):  # pragma: no cover - compiled
+    """Hole filling, the sequential part: the integral image of the validity of valid pixels,
+    integral[y+1, x+1] = Σ rows ≤ y, cols ≤ x."""
     h, w = valid.shape
-    for y in range(h):
-        for x in range(w):
-            valid_read[y, x] = valid[y, x]
     for y in range(h):
         row = 0.0
         for x in range(w):
@@ -241,7 +238,8 @@ def fill_holes_numba(
         scratch = np.empty((h, w), np.bool_)
     if integral is None:
         integral = np.zeros((h + 1, w + 1), np.float64)
-    _fill_prepare(state[0], state[3], scratch, integral)
+    np.copyto(scratch, state[0])  # valid_read, as in regularize_numba
+    _fill_integral(state[0], state[3], integral)
     run_rows(_fill_rows, (*state, max_grad, scratch, integral, prm), parallel)
 
 

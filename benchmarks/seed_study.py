@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/seed_study.py SEQUENCE [--seeds 0-9] [--feature gray] [--set section.key=value ...]
         [--jobs 2] [--max-frames N] [--r-l 1/3] [--intrinsics FX,FY,CX,CY] [--out DIR] [--name NAME]
+        [--trajectories]
 
 A monocular run from a random initial depth can land in different basins: on 7-Scenes one seed's RPE differs
 2–3× from the next (LSD-SLAM itself does the same, ``docs/lsd-slam-fidelity.md``). A claim that something is
@@ -11,7 +12,9 @@ more or less accurate is therefore a median over seeds (and its range), never on
 :func:`dmtrack.track` for every seed (one process per run, one numba thread each, ``--jobs`` at a time; results
 do not depend on it), and writes ``NAME.csv`` (one row per seed: tracked frames, keyframes, RPE rotation and
 translation angle, ATE) and ``NAME.md`` (the rows, then median and range of each metric, and the median over
-the first three seeds) into ``--out`` (default ``benchmarks/results``).
+the first three seeds) into ``--out`` (default ``benchmarks/results``). ``--trajectories`` also writes every seed's
+estimated trajectory (``NAME_seedS.txt``, TUM) and the ground truth (``NAME_groundtruth.txt``) there, e.g. for
+``benchmarks/orientation_drift.py``.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ def _fraction(text: str | None) -> float | None:
 
 
 def _run(job: tuple) -> dict:
-    sequence, feature, overrides, seed, max_frames, r_l, intrinsics = job
+    sequence, feature, overrides, seed, max_frames, r_l, intrinsics, traj_prefix = job
     os.environ["NUMBA_NUM_THREADS"] = "1"
     import dmtrack
     from dmtrack.odometry.config import VOConfig
@@ -52,6 +55,12 @@ def _run(job: tuple) -> dict:
         r_l=r_l,
         intrinsics=intrinsics,
     )
+    if traj_prefix is not None:
+        from dmtrack.io.trajectory import write_tum
+
+        write_tum(f"{traj_prefix}_seed{seed}.txt", res.trajectory)
+        if res.groundtruth is not None:
+            write_tum(f"{traj_prefix}_groundtruth.txt", res.groundtruth)
     m = res.metrics
     row = {"seed": seed, "tracked": m["tracked_frames"], "total": m["total_frames"], "keyframes": m["keyframes"]}
     row.update({k: m.get(k) for k in METRICS})
@@ -78,20 +87,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--intrinsics", default=None)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
     ap.add_argument("--name", default=None)
+    ap.add_argument("--trajectories", action="store_true", help="also write each seed's trajectory and the truth")
     a = ap.parse_args(argv)
     from dmtrack.io.bench_layout import parse_seeds
 
     seeds = parse_seeds(a.seeds)
-    jobs = [(a.sequence, a.feature, tuple(a.set), s, a.max_frames, _fraction(a.r_l), a.intrinsics) for s in seeds]
+    name = a.name or f"seeds_{Path(a.sequence).name}_{a.feature}"
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    prefix = str(out / name) if a.trajectories else None
+    jobs = [(a.sequence, a.feature, tuple(a.set), s, a.max_frames, _fraction(a.r_l), a.intrinsics, prefix)
+            for s in seeds]
     with ProcessPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         rows = []
         for row in pool.map(_run, jobs):
             rows.append(row)
             vals = " ".join(f"{k} {row[k]:.4g}" for k in METRICS if row[k] is not None)
             print(f"seed {row['seed']}: {row['tracked']}/{row['total']} tracked, {row['keyframes']} kf, {vals}")
-    name = a.name or f"seeds_{Path(a.sequence).name}_{a.feature}"
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
     with open(out / f"{name}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

@@ -1,8 +1,11 @@
-"""The two initialisation experiments of README.md here (monkeypatched, not in the package).
+"""The initialisation experiments of README.md here (monkeypatched, not in the package).
 
-Usage: ``python init_variants.py FEATURE SEEDS amp A`` (random inverse depth 1 + A·(U − 0.5) instead of LSD-SLAM's
-0.5 + U; A = 0 is a flat map) or ``python init_variants.py FEATURE SEEDS hold M`` (the first keyframe must be mapped
-more than M times before a new keyframe, instead of 5). SEEDS: comma-separated. Shared 7-Scenes 0–699.
+Usage: ``python init_variants.py FEATURE SEEDS KIND VALUE`` with SEEDS comma-separated, on the shared 7-Scenes 0–699:
+
+* ``amp A``: random inverse depth 1 + A·(U − 0.5) instead of LSD-SLAM's 0.5 + U (A = 0: a flat map);
+* ``hold M``: the first keyframe must be mapped more than M times before a new keyframe (instead of 5);
+* ``boot K``: a two-pass start. Pass 1 runs frames 0…K from the random map; pass 2 starts again at frame 0 with the
+  first keyframe's map as pass 1 left it (update count reset) and runs the whole sequence.
 """
 
 import dataclasses
@@ -26,6 +29,28 @@ if kind == "amp":
         self.idepth_smoothed[m] = d
 
     depthmap.DepthMap.initialize_random = initialize_random
+elif kind == "boot":
+    saved = {}
+    real_process = vo.VisualOdometry._process
+
+    def _process_saving(self, *args, **kwargs):
+        result = real_process(self, *args, **kwargs)
+        if self._n_frames == int(value) + 1 and self._kf_id == 0:
+            saved[self.config.seed] = tuple(a.copy() for a in self._dm.state)
+        return result
+
+    vo.VisualOdometry._process = _process_saving
+    track_many("../shared/data/7scenes-0000-0699", feature, [VOConfig(seed=s) for s in seeds],
+               max_frames=int(value) + 1)
+    vo.VisualOdometry._process = real_process
+    real_init = depthmap.DepthMap.initialize_random
+
+    def initialize_random(self, keyframe, seed):
+        real_init(self, keyframe, seed)
+        if seed in saved:
+            self._set_state(tuple(a.copy() for a in saved[seed]))
+
+    depthmap.DepthMap.initialize_random = initialize_random
 elif kind == "hold":
     real_process = vo.VisualOdometry._process
 
@@ -37,7 +62,7 @@ elif kind == "hold":
 
     vo.VisualOdometry._process = _process
 else:
-    raise SystemExit("kind must be amp or hold")
+    raise SystemExit("kind must be amp, hold or boot")
 results = track_many("../shared/data/7scenes-0000-0699", feature, [VOConfig(seed=s) for s in seeds])
 for seed, r in zip(seeds, results, strict=True):
     m = r.metrics

@@ -39,8 +39,9 @@ def matched(gt_path: str, est_path: str) -> tuple[np.ndarray, np.ndarray]:
     """Rotations of the ground truth and the estimate at the estimate's timestamps (exact matches, 1 ms)."""
     gt = read_tum(gt_path)
     est = read_tum(est_path)
-    idx = np.searchsorted(gt.timestamps, est.timestamps)
-    idx = np.clip(idx, 0, len(gt.timestamps) - 1)
+    hi = np.clip(np.searchsorted(gt.timestamps, est.timestamps), 0, len(gt.timestamps) - 1)
+    lo = np.clip(hi - 1, 0, len(gt.timestamps) - 1)
+    idx = np.where(np.abs(gt.timestamps[lo] - est.timestamps) < np.abs(gt.timestamps[hi] - est.timestamps), lo, hi)
     ok = np.abs(gt.timestamps[idx] - est.timestamps) < 1e-3
     if not ok.any():
         raise SystemExit(f"{est_path}: no timestamp matches the ground truth {gt_path}")

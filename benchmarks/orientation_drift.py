@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from dmtrack.geometry.lie import rotation_angle
+from dmtrack.io.association import associate_trajectories
 from dmtrack.io.trajectory import read_tum
 
 
@@ -36,16 +37,11 @@ def drift_curve(gt_rot: np.ndarray, est_rot: np.ndarray, start: int = 0) -> np.n
 
 
 def matched(gt_path: str, est_path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations of the ground truth and the estimate at the estimate's timestamps (exact matches, 1 ms)."""
-    gt = read_tum(gt_path)
-    est = read_tum(est_path)
-    hi = np.clip(np.searchsorted(gt.timestamps, est.timestamps), 0, len(gt.timestamps) - 1)
-    lo = np.clip(hi - 1, 0, len(gt.timestamps) - 1)
-    idx = np.where(np.abs(gt.timestamps[lo] - est.timestamps) < np.abs(gt.timestamps[hi] - est.timestamps), lo, hi)
-    ok = np.abs(gt.timestamps[idx] - est.timestamps) < 1e-3
-    if not ok.any():
+    """Rotations of the ground truth and the estimate at their matched timestamps (within 1 ms, time order)."""
+    gt, est = associate_trajectories(read_tum(gt_path), read_tum(est_path), max_diff=1e-3)
+    if len(est.timestamps) == 0:
         raise SystemExit(f"{est_path}: no timestamp matches the ground truth {gt_path}")
-    return gt.rotations[idx[ok]], est.rotations[ok]
+    return gt.rotations, est.rotations
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,7 +9,7 @@ The VO runs ``--frames`` frames of ``SEQUENCE`` (default: the shared 7-Scenes, e
 :func:`~dmtrack.odometry._depth_update.observe_numba` call is captured with its arguments and the depth map's state
 before it. That call is then replayed ``--repeat`` times per setting, serially and with the row threads
 (``parallel``), each time on a fresh copy of the pre-state, and the minimum time is reported with the counters
-(created / updated), which must agree between the serial and the threaded replays.
+(created / updated), which must agree between the serial and the threaded replays (exit 1 otherwise).
 
 ``--quantize STEP`` adds a replay of the same call with the keyframe and reference maps stored as uint8
 (``round(F / STEP)``, clipped to 0…255) and the residual factor multiplied by STEP², which keeps every threshold's
@@ -99,9 +99,16 @@ def main(argv: list[str] | None = None) -> int:
         quant[1], quant[5], quant[9] = q[0], q[1], float(args[9]) * step * step
         settings[f"uint8 (step {step:g})"] = quant
     rows = []
+    agree = True
     for name, call in settings.items():
+        serial_counts = None
         for parallel in (False, True):
             ms, counts = replay(call, state, parallel, a.repeat)
+            if serial_counts is None:
+                serial_counts = counts
+            elif counts != serial_counts:
+                agree = False
+                print(f"{name}: the threaded replay's counters differ from the serial one's", file=sys.stderr)
             named = dict(zip(COUNT_NAMES, counts, strict=True))
             rows.append({"maps": name, "parallel": parallel, "observe_ms": round(ms, 2), "counts": named})
             print(f"{name:<18} parallel={parallel!s:<5} observe {ms:7.1f} ms   created {named['created']:6d}  "
@@ -110,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         meta = {"sequence": a.sequence, "feature": a.feature, "frames": a.frames, "repeat": a.repeat,
                 "map_shape": list(kf.shape), "map_dtype": str(kf.dtype), "load_before": os.getloadavg()[0]}
         Path(a.json).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n", encoding="utf-8")
-    return 0
+    return 0 if agree else 1
 
 
 if __name__ == "__main__":

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import sys
 import textwrap
 from pathlib import Path
 
@@ -91,3 +93,53 @@ def test_killing_a_bench_stops_its_workers(tmp_path: Path, signame: str) -> None
         if proc.poll() is None:
             proc.kill()
     assert not list((out / "runs").glob("*/*/metrics.json"))  # nothing finished, nothing half-written
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_an_orphaned_worker_dies_at_once_even_while_holding_the_gil(tmp_path: Path) -> None:
+    """kill -9 of the bench while its worker is inside a long call that holds the GIL (numba code without
+    ``nogil``, a C loop): the worker must die at once, not when its polling thread next gets the GIL — else it
+    can recreate a temporary folder after the resuming bench cleaned the stale ones (a CI failure of
+    tests/faults/test_bench_resume.py)."""
+    import signal
+    import subprocess
+    import time
+
+    script = tmp_path / "parent.py"
+    pid_file = tmp_path / "worker.pid"
+    script.write_text(textwrap.dedent(f"""
+        import ctypes, os, time
+        from concurrent.futures import ProcessPoolExecutor
+        import multiprocessing
+        from dmtrack.experiments.backends import _init_worker
+
+        def hold_the_gil():
+            open({str(pid_file)!r}, "w").write(str(os.getpid()))
+            ctypes.PyDLL(None).sleep(60)  # PyDLL: the call keeps the GIL, so no Python thread runs meanwhile
+
+        if __name__ == "__main__":
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(1, mp_context=ctx, initializer=_init_worker, initargs=(1, os.getpid())) as p:
+                p.submit(hold_the_gil).result()
+    """))
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not (pid_file.exists() and pid_file.read_text()):
+            assert proc.poll() is None and time.monotonic() < deadline, "the worker did not start"
+            time.sleep(0.05)
+        worker = int(pid_file.read_text())
+        time.sleep(0.3)  # the worker is now inside the GIL-holding call
+        assert _alive(worker)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+        t0 = time.monotonic()
+        while _alive(worker) and time.monotonic() - t0 < 10:
+            time.sleep(0.02)
+        assert not _alive(worker), "the orphaned worker outlived its bench by 10 s"
+        assert time.monotonic() - t0 < 2.0, f"the orphaned worker lived {time.monotonic() - t0:.1f} s on"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        if pid_file.exists() and pid_file.read_text() and _alive(int(pid_file.read_text())):
+            os.kill(int(pid_file.read_text()), signal.SIGKILL)

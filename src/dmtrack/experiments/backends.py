@@ -20,6 +20,7 @@ retried once, each alone in a fresh pool; a run that kills its worker again is r
 from __future__ import annotations
 
 import os
+import sys
 import time
 import traceback
 from collections import deque
@@ -43,8 +44,11 @@ def run_tasks_inprocess(tasks: Iterable[RunTask], on_done: OnDone) -> None:
 def _init_worker(threads: int, parent_pid: int | None = None) -> None:
     """Process-pool initializer: runs in each fresh worker before any task (and before numba is imported).
 
-    With ``parent_pid``, a daemon thread ends the worker as soon as its parent is gone (a bench killed with
-    SIGKILL, or whose pool was torn down): an orphaned worker must not go on computing and writing into DIR.
+    With ``parent_pid``, the worker ends as soon as its parent is gone (a bench killed with SIGKILL, or whose
+    pool was torn down): an orphaned worker must not go on computing and writing into DIR, where the next
+    bench (resuming) would find a temporary folder created after it cleaned the stale ones.  On Linux the
+    kernel kills it at once (``PR_SET_PDEATHSIG``); elsewhere, and as a second guard, a daemon thread polls
+    the parent pid every 0.5 s (which a long call holding the GIL can delay).
     """
     for var in THREAD_ENV_VARS:
         os.environ[var] = str(max(1, int(threads)))
@@ -52,12 +56,34 @@ def _init_worker(threads: int, parent_pid: int | None = None) -> None:
     if parent_pid is not None:
         import threading
 
+        _die_with_parent()
+        if os.getppid() != parent_pid:  # the parent died before the line above took effect
+            os._exit(1)
+
         def watch() -> None:
             while os.getppid() == parent_pid:
                 time.sleep(0.5)
             os._exit(1)
 
         threading.Thread(target=watch, name="dmtrack-parent-watch", daemon=True).start()
+
+
+def _die_with_parent() -> bool:
+    """Linux: ask the kernel to SIGKILL this process when its parent (the thread that spawned it) exits.
+
+    Returns whether that is in place (False on other systems, or where ``prctl`` is unavailable).
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def _terminate_pool(pool: Any) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import statistics
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from dmtrack.errors import InputError
 from dmtrack.experiments.bench import run_bench
 from dmtrack.experiments.cli import add_bench_parser
 from dmtrack.experiments.grid import plan_grid
-from dmtrack.experiments.store import commit, run_state
+from dmtrack.experiments.store import clean_stale, commit, run_state
 from dmtrack.io.bench_layout import format_seeds, parse_seeds
 
 SYN = "synthetic:n_frames=25,width=320,height=240,seed=1,texel=0.02"
@@ -262,3 +263,44 @@ def test_cli_seed_errors(tmp_path: Path, extra: list[str], match: str):
 def test_cli_help_documents_seeds():
     text = " ".join(parser()._subparsers._group_actions[0].choices["bench"].format_help().split())  # type: ignore[union-attr]
     assert "--seeds LIST" in text and "0-2,5" in text and "seed-<S>" in text and "median" in text
+
+
+def _killed_inside_commit(tmp_path: Path, moved_seeds: int) -> tuple[Path, Path]:
+    """The folders a bench killed inside :func:`commit` leaves: the old ``gray`` (a single-seed run holding
+    seed-0 and seed-1) renamed to trash, and the new run still in its temporary folder; ``moved_seeds`` ≥ 0
+    means the rename of the new run happened and that many seed folders were moved before the kill."""
+    seq = tmp_path / "runs" / "s"
+    trash = seq / ".gray.trash-0123abcd"
+    for s in (0, 1):
+        (trash / f"seed-{s}").mkdir(parents=True)
+        (trash / f"seed-{s}" / "metrics.json").write_text(f'{{"seed": {s}}}')
+    (trash / "metrics.json").write_text('{"old": true}')
+    tmp = seq / ".gray.tmp-host-1-deadbeef"
+    tmp.mkdir()
+    (tmp / "metrics.json").write_text('{"new": true}')
+    final = seq / "gray"
+    if moved_seeds >= 0:
+        os.replace(tmp, final)
+        for s in range(moved_seeds):
+            os.replace(trash / f"seed-{s}", final / f"seed-{s}")
+    return seq, final
+
+
+@pytest.mark.parametrize("moved_seeds", [-1, 0, 1])
+def test_a_bench_killed_inside_commit_loses_no_seed_run(tmp_path: Path, moved_seeds: int):
+    seq, final = _killed_inside_commit(tmp_path, moved_seeds)
+    clean_stale(tmp_path)
+    assert [p.name for p in seq.iterdir()] == ["gray"]  # no temporary or trash folder left
+    for s in (0, 1):
+        assert json.loads((final / f"seed-{s}" / "metrics.json").read_text()) == {"seed": s}
+    # killed between the two renames, the old run is put back (and re-run if its spec differs); after them, the new
+    assert json.loads((final / "metrics.json").read_text()) == ({"old": True} if moved_seeds < 0 else {"new": True})
+
+
+def test_a_seed_run_killed_between_the_renames_is_put_back(tmp_path: Path):
+    feat = tmp_path / "runs" / "s" / "gray"
+    (feat / ".seed-1.trash-0a").mkdir(parents=True)
+    (feat / ".seed-1.trash-0a" / "metrics.json").write_text("{}")
+    (feat / ".seed-1.tmp-host-2-0b").mkdir()
+    assert clean_stale(tmp_path) == [feat / ".seed-1.tmp-host-2-0b"]
+    assert [p.name for p in feat.iterdir()] == ["seed-1"] and (feat / "seed-1" / "metrics.json").is_file()

@@ -20,8 +20,10 @@ A run writes into a hidden temporary folder next to its final one (:func:`run_fo
 ``runs/<sequence>/.<feature>.tmp-<host>-<pid>-<random>``; ``.seed-<S>.tmp-…`` in the feature folder) and is
 moved into place with ``os.replace`` only when complete (:func:`commit`: the old folder, if any, is first
 renamed away and then deleted).  A killed bench therefore never leaves a half-written ``metrics.json``; its
-leftover temporary folders are deleted by the next bench on the same ``DIR`` (:func:`clean_stale`) — so two
-benches must not write into the same ``DIR`` at the same time.
+leftover temporary folders are deleted by the next bench on the same ``DIR`` (:func:`clean_stale`; a bench
+killed inside :func:`commit` is completed or undone there first, so no finished run is lost) — so two benches
+must not write into the same ``DIR`` at the same time.  A bench's worker processes die with it (on Linux at
+once, :func:`dmtrack.experiments.backends._init_worker`): none writes into ``DIR`` after its bench was killed.
 """
 
 from __future__ import annotations
@@ -126,9 +128,32 @@ def _is_stale(p: Path) -> bool:
     return p.name.startswith(".") and (".tmp-" in p.name or ".trash-" in p.name)
 
 
+_TRASH = re.compile(r"^\.(?P<name>.+)\.trash-[0-9a-f]+$")
+
+
+def _recover_trash(trash: Path) -> None:
+    """Undo what a bench killed inside :func:`commit` left half done, before ``trash`` is deleted.
+
+    Killed between its two renames, the final folder is missing: the old one is put back (it is re-run if its
+    spec is not today's).  Killed while moving the ``seed-<S>/`` runs of a replaced feature folder into the new
+    one, those not yet moved are moved now: finished runs of other seeds are never deleted with the trash.
+    """
+    m = _TRASH.match(trash.name)
+    if m is None or not trash.is_dir():
+        return
+    final = trash.with_name(m["name"])
+    if not final.exists():
+        os.replace(trash, final)
+        return
+    for child in sorted(trash.iterdir()):
+        if child.is_dir() and SEED_DIR.match(child.name) and not (final / child.name).exists():
+            os.replace(child, final / child.name)
+
+
 def clean_stale(bench_dir: str | Path) -> list[Path]:
     """Delete the temporary / trash folders a killed bench left in ``DIR/runs/*/`` and, for the runs of
-    several seeds, in ``DIR/runs/*/*/``; returns them."""
+    several seeds, in ``DIR/runs/*/*/``; returns them.  A trash folder is first recovered
+    (:func:`_recover_trash`): a bench killed inside :func:`commit` loses no finished run."""
     removed = []
     runs = Path(bench_dir) / RUNS_DIR
     if not runs.is_dir():
@@ -136,15 +161,21 @@ def clean_stale(bench_dir: str | Path) -> list[Path]:
     for seq_dir in runs.iterdir():
         if not seq_dir.is_dir():
             continue
-        for d in seq_dir.iterdir():
+        for d in sorted(seq_dir.iterdir(), key=lambda p: ".trash-" not in p.name):  # trash first: it may restore
             if _is_stale(d):
+                _recover_trash(d)
+                if not d.exists():  # restored as its final folder
+                    continue
                 shutil.rmtree(d, ignore_errors=True) if d.is_dir() else d.unlink(missing_ok=True)
                 removed.append(d)
-            elif d.is_dir() and not d.name.startswith("."):
-                for sub in d.iterdir():
+        for d in seq_dir.iterdir():
+            if d.is_dir() and not d.name.startswith("."):
+                for sub in sorted(d.iterdir(), key=lambda p: ".trash-" not in p.name):
                     if sub.is_dir() and _STALE_SEED_DIR.match(sub.name):
-                        shutil.rmtree(sub, ignore_errors=True)
-                        removed.append(sub)
+                        _recover_trash(sub)
+                        if sub.exists():
+                            shutil.rmtree(sub, ignore_errors=True)
+                            removed.append(sub)
     return removed
 
 

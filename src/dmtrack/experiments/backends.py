@@ -68,22 +68,21 @@ def _init_worker(threads: int, parent_pid: int | None = None) -> None:
         threading.Thread(target=watch, name="dmtrack-parent-watch", daemon=True).start()
 
 
-def _die_with_parent() -> bool:
+def _die_with_parent() -> None:
     """Linux: ask the kernel to SIGKILL this process when its parent (the thread that spawned it) exits.
 
-    Returns whether that is in place (False on other systems, or where ``prctl`` is unavailable).
+    Nothing on other systems, or where ``prctl`` is unavailable (the polling thread then remains the guard).
     """
     if not sys.platform.startswith("linux"):
-        return False
+        return
     import ctypes
     import signal
 
     try:
-        libc = ctypes.CDLL(None, use_errno=True)
         pr_set_pdeathsig = 1
-        return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
     except (OSError, AttributeError):
-        return False
+        pass
 
 
 def _terminate_pool(pool: Any) -> None:

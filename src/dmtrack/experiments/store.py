@@ -115,10 +115,15 @@ def commit(tmp: Path, final: Path) -> None:
         os.replace(final, trash)
     os.replace(tmp, final)
     if trash is not None:
-        for child in sorted(trash.iterdir()):
-            if child.is_dir() and SEED_DIR.match(child.name) and not (final / child.name).exists():
-                os.replace(child, final / child.name)
+        _move_seed_runs(trash, final)
         shutil.rmtree(trash, ignore_errors=True)
+
+
+def _move_seed_runs(old: Path, new: Path) -> None:
+    """Move the ``seed-<S>/`` runs of the replaced feature folder ``old`` that ``new`` lacks into ``new``."""
+    for child in sorted(old.iterdir()):
+        if child.is_dir() and SEED_DIR.match(child.name) and not (new / child.name).exists():
+            os.replace(child, new / child.name)
 
 
 _STALE_SEED_DIR = re.compile(r"^\.seed-\d+\.(?:tmp|trash)-")
@@ -145,9 +150,7 @@ def _recover_trash(trash: Path) -> None:
     if not final.exists():
         os.replace(trash, final)
         return
-    for child in sorted(trash.iterdir()):
-        if child.is_dir() and SEED_DIR.match(child.name) and not (final / child.name).exists():
-            os.replace(child, final / child.name)
+    _move_seed_runs(trash, final)
 
 
 def clean_stale(bench_dir: str | Path) -> list[Path]:
@@ -161,7 +164,7 @@ def clean_stale(bench_dir: str | Path) -> list[Path]:
     for seq_dir in runs.iterdir():
         if not seq_dir.is_dir():
             continue
-        for d in sorted(seq_dir.iterdir(), key=lambda p: ".trash-" not in p.name):  # trash first: it may restore
+        for d in list(seq_dir.iterdir()):
             if _is_stale(d):
                 _recover_trash(d)
                 if not d.exists():  # restored as its final folder
@@ -170,7 +173,7 @@ def clean_stale(bench_dir: str | Path) -> list[Path]:
                 removed.append(d)
         for d in seq_dir.iterdir():
             if d.is_dir() and not d.name.startswith("."):
-                for sub in sorted(d.iterdir(), key=lambda p: ".trash-" not in p.name):
+                for sub in list(d.iterdir()):
                     if sub.is_dir() and _STALE_SEED_DIR.match(sub.name):
                         _recover_trash(sub)
                         if sub.exists():

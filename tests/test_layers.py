@@ -22,6 +22,7 @@ LAYERS: list[set[str]] = [
     {"io"},
     {"features", "datasets"},
     {"odometry"},
+    {"initialization"},
     {"training"},
     {"viz"},
     {"outputs"},

@@ -35,10 +35,11 @@ def grey(img: np.ndarray) -> np.ndarray:
 #: the tests pin down is tracking + mapping, not how fast a random initialisation happens to converge on this
 #: rotation-heavy synthetic trajectory (``test_random_init_tracks_everything`` covers the paper's random init).
 GT_INIT = VOConfig(init="groundtruth")
+RANDOM = VOConfig(init="random")  # the odometry alone: the geometric start needs dmtrack.initialization
 
 
 def run(seq, frames, config=None, feature=grey, n=None, sink=None):
-    vo = VisualOdometry(CAMERA, config, sink)
+    vo = VisualOdometry(CAMERA, RANDOM if config is None else config, sink)
     results = []
     for i, fr in enumerate(frames[:n]):
         depth = fr.depth if i == 0 else None
@@ -165,7 +166,7 @@ def test_parallel_and_thread_counts_give_identical_bytes(seq, frames) -> None:
     n = 14
     runs = []
     for parallel, threads in ((False, 1), (True, 1), (True, numba.config.NUMBA_NUM_THREADS), (None, None)):
-        vo = VisualOdometry(CAMERA, None, parallel=parallel, threads=threads)
+        vo = VisualOdometry(CAMERA, RANDOM, parallel=parallel, threads=threads)
         for fr in frames[:n]:
             vo.process(fr.index, fr.timestamp, fr.image, grey(fr.image))
         res = vo.finish()
@@ -173,7 +174,7 @@ def test_parallel_and_thread_counts_give_identical_bytes(seq, frames) -> None:
     assert runs[0][2] >= 2  # a keyframe switch happened
     assert all(r == runs[0] for r in runs[1:])
     with pytest.raises(InputError):
-        VisualOdometry(CAMERA, None, threads=0)
+        VisualOdometry(CAMERA, RANDOM, threads=0)
 
 
 def test_multichannel_feature(seq, frames) -> None:
@@ -191,7 +192,7 @@ def test_multichannel_feature(seq, frames) -> None:
 
 
 def test_loss_detection_and_stop(seq, frames) -> None:
-    cfg = VOConfig(keyframe=KeyframeConfig(loss_not_good_after=0))
+    cfg = VOConfig(init="random", keyframe=KeyframeConfig(loss_not_good_after=0))
     sink = MemorySink()
     vo = VisualOdometry(CAMERA, cfg, MultiSink(sink))
     for fr in frames[:5]:
@@ -209,7 +210,7 @@ def test_loss_detection_and_stop(seq, frames) -> None:
 
 
 def test_continue_after_loss(seq, frames) -> None:
-    cfg = VOConfig(keyframe=KeyframeConfig(loss_not_good_after=0), stop_on_loss=False)
+    cfg = VOConfig(init="random", keyframe=KeyframeConfig(loss_not_good_after=0), stop_on_loss=False)
     vo = VisualOdometry(CAMERA, cfg)
     for fr in frames[:5]:
         vo.process(fr.index, fr.timestamp, fr.image, grey(fr.image))
@@ -308,7 +309,7 @@ def test_overlapped_mapping_gives_identical_bytes(seq, frames, threads) -> None:
     runs = []
     for overlap in (False, True):
         sink = MemorySink()
-        vo = VisualOdometry(CAMERA, None, sink, threads=threads, overlap=overlap)
+        vo = VisualOdometry(CAMERA, RANDOM, sink, threads=threads, overlap=overlap)
         assert vo.overlap is overlap
         results = [vo.process(f.index, f.timestamp, f.image, grey(f.image)) for f in frames[:n]]
         res = vo.finish()
@@ -326,12 +327,12 @@ def test_overlapped_mapping_gives_identical_bytes(seq, frames, threads) -> None:
     assert sum(runs[0][5]) >= 2  # a keyframe switch happened
     assert runs[1] == runs[0]
     with pytest.raises(InputError, match="map_lag"):
-        VisualOdometry(CAMERA, VOConfig(map_lag=0), overlap=True)
+        VisualOdometry(CAMERA, VOConfig(init="random", map_lag=0), overlap=True)
 
 
 def test_overlapped_mapping_error_is_raised_not_lost(seq, frames) -> None:
     """An exception in the mapping worker comes out of the next process() call (or finish())."""
-    vo = VisualOdometry(CAMERA, None, overlap=True)
+    vo = VisualOdometry(CAMERA, RANDOM, overlap=True)
     for f in frames[:3]:
         vo.process(f.index, f.timestamp, f.image, grey(f.image))
     dm = vo.depth_map  # waits for frame 2's mapping
@@ -343,7 +344,7 @@ def test_overlapped_mapping_error_is_raised_not_lost(seq, frames) -> None:
     vo.process(frames[3].index, frames[3].timestamp, frames[3].image, grey(frames[3].image))
     with pytest.raises(RuntimeError, match="on purpose"):
         vo.process(frames[4].index, frames[4].timestamp, frames[4].image, grey(frames[4].image))
-    vo2 = VisualOdometry(CAMERA, None, overlap=True)
+    vo2 = VisualOdometry(CAMERA, RANDOM, overlap=True)
     for f in frames[:3]:
         vo2.process(f.index, f.timestamp, f.image, grey(f.image))
     vo2.depth_map.update = broken  # type: ignore[method-assign]
@@ -364,7 +365,7 @@ def test_keyframe_emitted_once_when_the_sink_raises(seq, frames) -> None:
                 raise OSError("disk full on purpose")
 
     sink = Failing()
-    vo = VisualOdometry(CAMERA, VOConfig(keyframe=KeyframeConfig(threshold=0.0)), sink)
+    vo = VisualOdometry(CAMERA, VOConfig(init="random", keyframe=KeyframeConfig(threshold=0.0)), sink)
     with pytest.raises(OSError, match="on purpose"):
         for f in frames[:12]:
             vo.process(f.index, f.timestamp, f.image, grey(f.image))

@@ -248,6 +248,78 @@ class KeyframeConfig:
     LSD-SLAM does in pure VO mode, where its keyframe graph stays empty (lsd-slam-spec.md §6)."""
 
 
+INIT_MODES = ("random", "geometric", "groundtruth")
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    """The geometric start (``VOConfig.init = "geometric"``, :mod:`dmtrack.initialization`, docs/initialization.md).
+
+    Corners of the first frame are tracked (KLT) through the following frames; at each frame an essential matrix
+    and a homography are fitted (RANSAC); once the translation gives enough parallax, a bundle adjustment over the
+    window fixes the poses, the first keyframe's map is made by the depth map's own stereo from the window's
+    frames, and the frames are re-aligned to that map (``refine_iterations``)."""
+
+    corners: int = 600
+    """Corners detected in the first frame (``cv2.goodFeaturesToTrack``)."""
+    corner_distance: float = 8.0
+    """Smallest distance between two corners, pixels."""
+    klt_window: int = 21
+    """KLT window side, pixels (``cv2.calcOpticalFlowPyrLK``)."""
+    klt_levels: int = 3
+    """KLT pyramid levels above the image."""
+    max_fb_error: float = 0.5
+    """A track is dropped when tracking it back lands farther than this from where it started, pixels."""
+    ransac_px: float = 1.0
+    """RANSAC threshold of the essential matrix, pixels."""
+    min_parallax_deg: float = 0.5
+    """Median parallax angle of the triangulated corners, degrees, before the window is tried."""
+    max_homography_fraction: float = 0.9
+    """The window is tried only when at most this fraction of the essential matrix's inliers also fits one
+    homography within 2 px (more: the motion is a rotation or the scene a plane, so far)."""
+    min_inliers: int = 80
+    """Fewest corners consistent with the two-view geometry (and kept by the bundle adjustment)."""
+    min_frames: int = 8
+    """Fewest frames after the first in the window."""
+    max_frames: int = 90
+    """Frames after the first before the start gives up (then it refuses: see ``VOConfig.init``)."""
+    max_reprojection_px: float = 1.0
+    """Median reprojection error the bundle adjustment must reach for the window to be accepted, pixels."""
+    agree_rot_deg: float = 0.75
+    """Two successive tries must agree on the newest frame of the earlier one within this rotation, degrees (a
+    short baseline can fit a wrong motion as well as the right one; a wrong one does not last)."""
+    agree_tdir_deg: float = 20.0
+    """... and within this angle between their directions of motion, degrees."""
+    map_frames: int = 6
+    """Frames of the window (evenly spaced, the last included) whose stereo makes the first map."""
+    refine_iterations: int = 0
+    """Times the window's frames are re-aligned to the map (the depth map's tracker) and the map made again."""
+    stereo_residual: float = 0.0
+    """Tracking residual the first map's stereo assumes (0: the poses are taken as exact)."""
+
+    def __post_init__(self) -> None:
+        positive = ("corners", "klt_window", "min_inliers", "min_frames", "max_frames", "map_frames")
+        for name in positive:
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"initializer.{name} must be ≥ 1, got {getattr(self, name)}")
+        if self.klt_levels < 0 or self.refine_iterations < 0:
+            raise InputError("initializer.klt_levels and initializer.refine_iterations must be ≥ 0")
+        for name in ("corner_distance", "max_fb_error", "ransac_px", "max_reprojection_px", "agree_rot_deg",
+                     "agree_tdir_deg"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"initializer.{name} must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.min_parallax_deg < 90:
+            raise InputError(f"initializer.min_parallax_deg must be in [0, 90), got {self.min_parallax_deg}")
+        if not 0 < self.max_homography_fraction <= 1:
+            raise InputError(
+                f"initializer.max_homography_fraction must be in (0, 1], got {self.max_homography_fraction}"
+            )
+        if self.min_frames > self.max_frames:
+            raise InputError(f"initializer.min_frames {self.min_frames} > max_frames {self.max_frames}")
+        if self.stereo_residual < 0:
+            raise InputError(f"initializer.stereo_residual must be ≥ 0, got {self.stereo_residual}")
+
+
 @dataclass(frozen=True)
 class VOConfig:
     """Whole odometry configuration."""
@@ -255,10 +327,11 @@ class VOConfig:
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     depth: DepthConfig = field(default_factory=DepthConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
+    initializer: InitConfig = field(default_factory=InitConfig)
     pyramid_levels: int = 5
     """Number of pyramid levels built per frame (0..pyramid_levels−1)."""
     seed: int = 0
-    """Seed of the random depth initialisation."""
+    """Seed of the random depth initialisation (``init="random"``, or a geometric start that refused)."""
     map_lag: int = 1
     """Frames by which the map the tracker uses lags the mapping: frame n is tracked against (and its keyframe
     test sees numMapped and meanIdepth of) the keyframe's depth map as mapped through frame n − 1 − map_lag, or
@@ -294,10 +367,14 @@ class VOConfig:
     (N_σ − N_E)·``tracker.camera_pixel_noise2``: the grey allowance for appearance change, in feature units, plus
     the noise the feature has beyond a grey-like one; the per-pixel flags keep N_E·40². ``None``: the feature's
     calibrated value (filled in by :func:`dmtrack.track`), or N_E (no extra noise) when it has none."""
-    init: str = "random"
-    """How the first keyframe's depth starts: ``"random"`` (LSD-SLAM's seeded random inverse depth, the paper's
-    setting) or ``"groundtruth"`` (the dataset's depth of the first frame, as LSD-SLAM's ``gtDepthInit``:
-    variance 0.01², metric scale; needs a depth image registered to the camera)."""
+    init: str = "geometric"
+    """How the first keyframe's depth starts: ``"geometric"`` (default: the first map from the frames' own
+    geometry, :class:`InitConfig`, made by :mod:`dmtrack.initialization` before the odometry starts —
+    ``dmtrack.track`` does it; the seed plays no part; if the motion never gives the parallax it needs, the run
+    starts from the random map and says so in ``metrics.json``), ``"random"`` (LSD-SLAM's seeded random inverse
+    depth, the paper's setting, byte-identical to dmtrack before the geometric start) or ``"groundtruth"`` (the
+    dataset's depth of the first frame, as LSD-SLAM's ``gtDepthInit``: variance 0.01², metric scale; needs a depth
+    image registered to the camera)."""
 
     def __post_init__(self) -> None:
         if self.channel_cost not in CHANNEL_COSTS:
@@ -306,8 +383,8 @@ class VOConfig:
             v = getattr(self, key)
             if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf")):
                 raise InputError(f"{key} must be a positive number, not {_short(v)}")
-        if self.init not in ("random", "groundtruth"):
-            raise InputError(f"init must be 'random' or 'groundtruth', not {_short(self.init)}")
+        if self.init not in INIT_MODES:
+            raise InputError(f"init must be one of {', '.join(INIT_MODES)}, not {_short(self.init)}")
         if self.map_lag < 0:
             raise InputError(f"map_lag must be ≥ 0, got {self.map_lag}")
         if not 1 <= self.pyramid_levels <= MAX_PYRAMID_LEVELS:
@@ -327,7 +404,12 @@ class VOConfig:
         """Build from a nested dict; unknown keys raise :class:`InputError` (naming ``path`` if given)."""
         if not isinstance(data, dict):
             raise InputError("configuration must be a mapping", path=path)
-        sub_types = {"tracker": TrackerConfig, "depth": DepthConfig, "keyframe": KeyframeConfig}
+        sub_types = {
+            "tracker": TrackerConfig,
+            "depth": DepthConfig,
+            "keyframe": KeyframeConfig,
+            "initializer": InitConfig,
+        }
         kwargs: dict[str, Any] = {}
         top_fields = {f.name for f in dataclasses.fields(cls)}
         for key, value in data.items():

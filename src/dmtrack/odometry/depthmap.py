@@ -78,6 +78,7 @@ from dmtrack.odometry.config import ChannelRule, DepthConfig
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.odometry.frame import Frame
+    from dmtrack.odometry.initial_map import InitialMap
 
 __all__ = ["DepthMap"]
 
@@ -295,6 +296,36 @@ class DepthMap:
         self.scale_from_parent = 1.0
         self.T_new_old = None
 
+    def initialize_from_map(self, keyframe: Frame, initial: InitialMap) -> None:
+        """Initialise from a map made outside the odometry (:class:`~dmtrack.odometry.initial_map.InitialMap`).
+
+        Its hypotheses are taken as they are, on the pixels this keyframe can use (maxGrad > minUseGrad, one
+        pixel inside the border, as :meth:`initialize_random`); blacklist and scheduling start afresh.
+        """
+        h, w = keyframe.height, keyframe.width
+        if initial.shape != (h, w):
+            raise InputError(f"initial map is {initial.shape[1]}x{initial.shape[0]}, keyframe is {w}x{h}")
+        mg = keyframe.levels[0].max_grad
+        mask = np.zeros((h, w), bool)
+        mask[1 : h - 1, 1 : w - 1] = mg[1 : h - 1, 1 : w - 1] > self.config.min_use_grad
+        mask &= np.asarray(initial.valid, bool)
+        state = empty_state((h, w))
+        valid, _bl, _nx, validity, idepth, var, idepth_s, var_s = state
+        valid[mask] = True
+        for dst, src in (
+            (validity, initial.validity),
+            (idepth, initial.idepth),
+            (var, initial.idepth_var),
+            (idepth_s, initial.idepth_smoothed),
+            (var_s, initial.idepth_var_smoothed),
+        ):
+            dst[mask] = np.asarray(src, np.float32)[mask]
+        self.keyframe = keyframe
+        self._set_state(state)
+        self.n_updates = 0
+        self.scale_from_parent = 1.0
+        self.T_new_old = None
+
     # ------------------------------------------------------------------------------------------ stages
     def observe(
         self,
@@ -487,6 +518,11 @@ class DepthMap:
             "total": 1e3 * (t4 - t0),
         }
         return child
+
+    def normalize_scale(self) -> float:
+        """Scale the inverse depths so that the mean smoothed inverse depth of the valid pixels is 1; return ρ
+        (see :meth:`_normalize_scale`); lengths in this keyframe's units (depths, translations) scale by 1/ρ."""
+        return self._normalize_scale()
 
     def _normalize_scale(self) -> float:
         """Scale inverse depths so that the mean smoothed idepth of valid pixels is 1; return ρ.

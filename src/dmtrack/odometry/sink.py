@@ -13,7 +13,9 @@ A sink may also have the **optional** method ``on_frame_info(info)``: it is then
 (tracked or lost; not for the frames skipped after a loss), after that frame's ``on_frame`` / ``on_lost`` and
 ``on_keyframe`` calls, with a :class:`FrameInfo` — the tracker's numbers, the timings and read-only references to
 the frame's image and to the current keyframe's inverse depth, for viewers. The odometry looks the method up once,
-when it is created: a sink without it costs nothing and changes nothing.
+when it is created: a sink without it costs nothing and changes nothing. Likewise the optional
+``on_initial_map(snapshot)`` is called once, when the first keyframe is created, with a :class:`KeyframeSnapshot`
+of its map as the start left it (random, geometric or ground truth), before any frame was mapped into it.
 
 The protocol and the snapshot type belong to the odometry (it calls them); the sinks themselves — the run-folder
 writer, :class:`~dmtrack.outputs.memory.MemorySink`, :class:`~dmtrack.outputs.memory.MultiSink` — live in
@@ -210,3 +212,4 @@ class OutputSink(Protocol):
         """No more calls follow."""
 
     # optional: def on_frame_info(self, info: FrameInfo) -> None — see the module docstring
+    # optional: def on_initial_map(self, snapshot: KeyframeSnapshot) -> None — see the module docstring

@@ -3,7 +3,9 @@
 Per frame (:meth:`VisualOdometry.process`):
 
 1. build the feature pyramid (:func:`~dmtrack.odometry.frame.build_frame`);
-2. the first frame becomes keyframe 0 (pose identity) with a seeded random depth map;
+2. the first frame becomes keyframe 0 (pose identity) with a seeded random depth map (``init="random"``), the
+   map of the geometric start (:class:`~dmtrack.odometry.initial_map.InitialMap`, made by
+   :mod:`dmtrack.initialization` before this frame is processed) or the dataset's depth;
 3. every later frame is tracked against the current keyframe (:class:`~dmtrack.odometry.tracker.Tracker`),
    starting from the previous frame's pose relative to that keyframe (constant position), and against the
    keyframe's map as it was ``map_lag`` frames earlier (see *Schedule*);
@@ -66,6 +68,7 @@ from dmtrack.odometry.tracker import Tracker, TrackingReference, TrackResult
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.geometry.camera import PinholeCamera
+    from dmtrack.odometry.initial_map import InitialMap
 
 __all__ = ["FrameResult", "KeyframeRecord", "VOResult", "VisualOdometry", "keyframe_score"]
 
@@ -287,6 +290,7 @@ class VisualOdometry:
         self._pending: tuple[Future, FrameResult] | None = None  # the mapping in flight and its frame's result
         self.sink = sink
         self._on_frame_info = getattr(sink, "on_frame_info", None)  # optional sink method (viewers)
+        self._on_initial_map = getattr(sink, "on_initial_map", None)  # optional: the first keyframe's map at start
         self.use_numba = use_numba
         self.parallel = bool(parallel)
         self.tracker = Tracker(
@@ -347,15 +351,16 @@ class VisualOdometry:
         image: np.ndarray | None,
         feature_map: np.ndarray,
         depth: np.ndarray | None = None,
+        initial_map: InitialMap | None = None,
     ) -> FrameResult:
         """Process one frame (see :meth:`_process`; runs with ``threads`` numba threads if given)."""
         if self.threads is None:
-            result = self._process(index, timestamp, image, feature_map, depth)
+            result = self._process(index, timestamp, image, feature_map, depth, initial_map)
         else:
             prev = numba.get_num_threads()
             numba.set_num_threads(self.threads)
             try:
-                result = self._process(index, timestamp, image, feature_map, depth)
+                result = self._process(index, timestamp, image, feature_map, depth, initial_map)
             finally:
                 numba.set_num_threads(prev)
         if self._on_frame_info is not None and result.keyframe_id >= 0:
@@ -370,6 +375,7 @@ class VisualOdometry:
         image: np.ndarray | None,
         feature_map: np.ndarray,
         depth: np.ndarray | None = None,
+        initial_map: InitialMap | None = None,
     ) -> FrameResult:
         """Process one frame.
 
@@ -385,6 +391,9 @@ class VisualOdometry:
             (H, W, N) (or (H, W)) float feature map, grey = 0..255.
         depth : np.ndarray, optional
             (H, W) true depth (0 or NaN = unknown) of the first frame, used with ``config.init = "groundtruth"``.
+        initial_map : InitialMap, optional
+            The first keyframe's map with ``config.init = "geometric"`` (given with the first frame; the start
+            made it from this and the following frames, :mod:`dmtrack.initialization`).
 
         Raises
         ------
@@ -409,7 +418,7 @@ class VisualOdometry:
         self._t_sum["pyramid"] += pyramid_ms
 
         if self._kf is None:
-            return self._initialize(frame, pyramid_ms, depth)
+            return self._initialize(frame, pyramid_ms, depth, initial_map)
 
         assert self._dm is not None
         # ---- tracking, against the map as of map_lag frames earlier (see _snapshot_for)
@@ -512,7 +521,9 @@ class VisualOdometry:
         self._pending = None
         self._apply_mapping(result, future.result())
 
-    def _initialize(self, frame: Frame, pyramid_ms: float, depth: np.ndarray | None = None) -> FrameResult:
+    def _initialize(
+        self, frame: Frame, pyramid_ms: float, depth: np.ndarray | None = None, initial: InitialMap | None = None
+    ) -> FrameResult:
         t0 = time.perf_counter()
         dm = DepthMap(
             self.config.depth,
@@ -522,7 +533,16 @@ class VisualOdometry:
             info_channels=self.config.info_channels,
             energy_channels=self.config.energy_channels,
         )
-        if self.config.init == "groundtruth":
+        if self.config.init == "geometric":
+            if initial is None:
+                raise InputError(
+                    "init='geometric' needs the first keyframe's map (dmtrack.initialization.GeometricInitializer; "
+                    "dmtrack.track makes it)"
+                )
+            if initial.frame_index != frame.index:
+                raise InputError(f"the initial map is of frame {initial.frame_index}, the first frame is {frame.index}")
+            dm.initialize_from_map(frame, initial)
+        elif self.config.init == "groundtruth":
             if depth is None:
                 raise InputError("init='groundtruth' needs the first frame's depth image")
             d = np.asarray(depth, dtype=np.float64)
@@ -539,6 +559,8 @@ class VisualOdometry:
         self._snaps = []
         self._take_snapshot(self._n_frames - 1)
         self._keyframes.append(KeyframeRecord(0, frame.index, frame.timestamp, np.eye(4), 1.0, 1.0))
+        if self._on_initial_map is not None:
+            self._on_initial_map(self._snapshot(0, frame, dm))
         mapping_ms = 1e3 * (time.perf_counter() - t0)
         self._t_sum["mapping"] += mapping_ms
         T_wc = np.eye(4)
@@ -597,8 +619,13 @@ class VisualOdometry:
         if self.sink is None:
             return
         rec = self._keyframes[kf_id]
+        self.sink.on_keyframe(kf_id, kf.index, kf.timestamp, rec.T_wc.copy(), self._snapshot(kf_id, kf, dm))
+
+    def _snapshot(self, kf_id: int, kf: Frame, dm: DepthMap) -> KeyframeSnapshot:
+        """The keyframe's depth as it is now (copied arrays)."""
+        rec = self._keyframes[kf_id]
         idepth, var = dm.tracking_depth()
-        snap = KeyframeSnapshot(
+        return KeyframeSnapshot(
             keyframe_id=kf_id,
             frame_index=kf.index,
             timestamp=kf.timestamp,
@@ -610,7 +637,6 @@ class VisualOdometry:
             camera=kf.camera,
             n_updates=dm.n_updates,
         )
-        self.sink.on_keyframe(kf_id, kf.index, kf.timestamp, rec.T_wc.copy(), snap)
 
     def _frame_info(self, r: FrameResult, image: np.ndarray | None) -> FrameInfo:
         """The :class:`FrameInfo` of a processed frame: its numbers, and read-only views of the live arrays."""

@@ -50,12 +50,12 @@ def test_frames_are_read_ahead_within_a_memory_budget(channels: int, ahead: int)
     none for 640×480×128 float32 maps (157 MB each: dense SIFT would otherwise hold three more of them)."""
     import numpy as np
 
-    from dmtrack import pipeline
+    from dmtrack.datasets.prefetch import PrefetchedFrames
 
     def load(i: int) -> tuple:
         return float(i), None, np.zeros((480, 640, channels), np.float32), 0.0, 0.0, None
 
-    frames = pipeline._Prefetched(load, 0, 8)
+    frames = PrefetchedFrames(load, 0, 8)
     in_flight = []
     try:
         for i, item in frames:

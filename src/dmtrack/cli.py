@@ -184,6 +184,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     lost = "never lost" if m["lost_at"] is None else f"lost at frame {m['lost_at']} ({m['lost_reason']})"
     print(f"{m['sequence']} [{m['feature']}]: tracked {m['tracked_frames']}/{m['total_frames']} frames, {lost}; "
           f"{m['keyframes']} keyframes, {m.get('points', 0)} points")
+    if m.get("init_accepted_frame") is not None:
+        print(f"start: geometric, first map accepted at frame {m['init_accepted_frame']} ({m['init_s']:.2f} s)")
+    elif m.get("init_fallback"):
+        print(f"start: geometric refused, random map (seed {m['seed']}) instead")
     if m.get("realtime"):
         print(f"realtime: {m['dropped_frames']} frames dropped")
     print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms, "
@@ -406,8 +410,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override one parameter, e.g. --set tracker.huber_d=2 (repeatable)")
     p.add_argument("--r-l", type=fraction, metavar="R",
                    help="RPE length ratio (default 1/20 for KITTI, 1/3 otherwise; the paper uses 1/20 for Tsukuba)")
-    p.add_argument("--init", choices=("random", "groundtruth"),
-                   help="first keyframe's depth: seeded random (default, the paper) or the dataset's depth image")
+    p.add_argument("--init", choices=("random", "geometric", "groundtruth"),
+                   help="first keyframe's depth: seeded random (the paper's), geometric (from the first frames' own "
+                        "motion: tracked corners, essential matrix, bundle adjustment, stereo) or the dataset's depth "
+                        "image (docs/initialization.md)")
     p.add_argument("--continue-after-loss", action="store_true",
                    help="keep going after a tracking loss (default: stop there, as the paper counts tracked frames)")
     p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png")

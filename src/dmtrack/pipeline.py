@@ -25,8 +25,8 @@ import json
 import math
 import os
 import time
-from collections import deque
-from concurrent.futures import Future, ThreadPoolExecutor
+import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,9 +35,11 @@ import numpy as np
 
 from dmtrack import __version__
 from dmtrack.datasets.base import Sequence
-from dmtrack.datasets.stream import EndOfStream, FrameGrabber, live_source
+from dmtrack.datasets.prefetch import PrefetchedFrames
+from dmtrack.datasets.stream import EndOfStream, RealtimeFrames, live_source
 from dmtrack.errors import DmtrackError, InputError, Interrupted, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
+from dmtrack.initialization.run_start import RunStart
 from dmtrack.io.atomic import prepare_folder, write_text
 from dmtrack.io.trajectory import Trajectory, write_tum
 from dmtrack.odometry._fastmath import kernel_target
@@ -51,11 +53,6 @@ R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
 DEFAULT_R_L = 1.0 / 3.0
 #: First line of a run folder's ``groundtruth.txt``.
 GROUNDTRUTH_HEADER = "ground truth of the run's frames (camera-to-world, TUM format, the dataset's units)"
-#: Frames read and converted ahead of the odometry by :func:`track`'s background thread (besides the next one)...
-PREFETCH = 2
-#: ... while their feature maps take at most this many bytes: a 640×480 dense SIFT map is 157 MB, so its frames are
-#: read and converted in turn, on that thread (the order and the results are the same; only memory and speed differ).
-PREFETCH_BYTES = 64 << 20
 
 
 class _StopBetweenFrames:
@@ -127,6 +124,8 @@ class RunResult:
     realtime : whether the run was a ``realtime`` one.
     compile_s : seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
         0 when this process had warmed up the feature and configuration already, or without warm-up).
+    init : how the first map was made: ``metrics.json``'s ``init*`` keys
+        (:meth:`~dmtrack.initialization.run_start.RunStart.metrics`).
     """
 
     trajectory: Trajectory
@@ -144,6 +143,7 @@ class RunResult:
     dropped_frames: int = 0
     realtime: bool = False
     compile_s: float = 0.0
+    init: dict[str, Any] = field(default_factory=dict)
 
 
 def _open(sequence: str | Path | Sequence, format: str | None, intrinsics: str | Path | None) -> Sequence:
@@ -168,6 +168,7 @@ def track(
     start: int = 0,
     max_frames: int | None = None,
     seed: int | None = None,
+    init: str | None = None,
     sink: OutputSink | None = None,
     format: str | None = None,
     intrinsics: str | Path | None = None,
@@ -187,6 +188,8 @@ def track(
     start, max_frames : process frames ``start … start + max_frames − 1`` (of a live source: the frames it
         delivers, until it ends when ``max_frames`` is None).
     seed : seed of the random depth initialisation (overrides ``config.seed``).
+    init : how the first keyframe's map is made, ``"random"``, ``"geometric"`` or ``"groundtruth"`` (overrides
+        ``config.init``; see :class:`~dmtrack.odometry.config.VOConfig` and docs/initialization.md).
     sink : receives poses / keyframes / losses as they happen (e.g. :class:`RunDirectorySink`).
     intrinsics : ``"fx,fy,cx,cy"`` or a calibration file (see :func:`dmtrack.datasets.open_sequence`).
     r_l : RPE length ratio for the metrics (default: 1/20 for KITTI, 1/3 otherwise).
@@ -205,8 +208,8 @@ def track(
         Bad sequence, missing intrinsics, bad arguments.
     """
     result = _track(
-        sequence, feature, config, start=start, max_frames=max_frames, seed=seed, sink=sink, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
+        sequence, feature, config, start=start, max_frames=max_frames, seed=seed, init=init, sink=sink,
+        format=format, intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
     )
     _raise_halt([result])
     return result
@@ -218,14 +221,22 @@ def _track(
     config: VOConfig | None = None,
     *,
     seed: int | None = None,
+    init: str | None = None,
     sink: OutputSink | None = None,
     **kwargs: Any,
 ) -> RunResult:
     """:func:`track` without re-raising ``halted_by`` (the caller saves what was finished first)."""
-    config = config or VOConfig()
+    config = _with_start(config or VOConfig(), seed, init)
+    return _track_many(sequence, feature, [config], sinks=[sink], **kwargs)[0]
+
+
+def _with_start(config: VOConfig, seed: int | None, init: str | None) -> VOConfig:
+    """``config`` with ``seed`` and ``init`` where they are given."""
     if seed is not None:
         config = config.with_overrides(f"seed={int(seed)}")
-    return _track_many(sequence, feature, [config], sinks=[sink], **kwargs)[0]
+    if init is not None:
+        config = config.with_overrides(f"init={init}")
+    return config
 
 
 def _raise_halt(results: list[RunResult]) -> None:
@@ -269,88 +280,6 @@ def track_many(
     )
     _raise_halt(results)
     return results
-
-
-class _Prefetched:
-    """Frames ``start … stop − 1`` (``stop=None``: until a live source ends) loaded by one background thread, in
-    order, at most :data:`PREFETCH` frames ahead; the odometry consumes them in order, so results are the same as
-    loading them inline."""
-
-    def __init__(self, load: Any, start: int, stop: int | None) -> None:
-        self._load = load
-        self._start, self._stop = start, stop
-        self._ahead = PREFETCH  # frames in flight besides the next one, set from the first frame's feature size
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dmtrack-prefetch")
-        self._pending: deque[Future] = deque()
-        self.delivered = 0
-        self.dropped = 0
-
-    def __iter__(self) -> Any:
-        nxt = i = self._start
-        while self._stop is None or i < self._stop:
-            # none ahead until the first feature map's size is known, then as many as PREFETCH_BYTES holds
-            ahead = self._ahead if i > self._start else 0
-            while (self._stop is None or nxt < self._stop) and len(self._pending) <= ahead:
-                self._pending.append(self._pool.submit(self._load, nxt))
-                nxt += 1
-            try:
-                item = self._pending.popleft().result()
-            except EndOfStream:  # a live source ended
-                return
-            if i == self._start:
-                size = _feature_bytes(item[2])
-                self._ahead = min(PREFETCH, PREFETCH_BYTES // max(size, 1))
-            self.delivered += 1
-            yield i, item
-            item = None  # the odometry is done with frame i: its feature map goes before the next one is awaited
-            i += 1
-
-    def close(self) -> None:
-        for fut in self._pending:
-            fut.cancel()
-        self._pool.shutdown(wait=True)
-
-
-def _feature_bytes(fmap: Any) -> int:
-    """Bytes of a prepared frame's feature map (one array, or one per pyramid level)."""
-    if isinstance(fmap, (list, tuple)):
-        return sum(int(getattr(f, "nbytes", 0)) for f in fmap)
-    return int(getattr(fmap, "nbytes", 0))
-
-
-class _Realtime:
-    """The newest frame of a :class:`~dmtrack.datasets.stream.FrameGrabber` (reading frames with ``read(i)``) each
-    time the odometry is ready; ``prepare`` (crop + feature) runs on the calling thread. Stops when the grabber ends
-    or ``should_stop()``."""
-
-    def __init__(
-        self, seq: Sequence, read: Any, start: int, stop: int | None, live: bool, prepare: Any, should_stop: Any
-    ) -> None:
-        self._grabber = FrameGrabber(read, start, stop, None if live else seq.timestamps)
-        self._prepare = prepare
-        self._should_stop = should_stop
-
-    @property
-    def delivered(self) -> int:
-        return self._grabber.delivered
-
-    @property
-    def dropped(self) -> int:
-        return self._grabber.dropped
-
-    def __iter__(self) -> Any:
-        self._grabber.start()
-        while True:
-            item = self._grabber.take(timeout=0.05)
-            if item is None:
-                if self._grabber.finished or self._should_stop():
-                    return
-                continue
-            i, frame, read_s = item
-            yield i, self._prepare(frame, read_s)
-
-    def close(self) -> None:
-        self._grabber.close()
 
 
 def _track_many(
@@ -450,8 +379,12 @@ def _track_sequence(
 
     read_frame = getattr(seq, "read_frame", None)
 
+    kept: dict[int, Any] = {}  # frames read for the geometric start, given to the odometry next
+
     def read(i: int) -> Any:
         # the ground-truth depth is decoded only for init='groundtruth' (of the first frame, or any frame grabbed)
+        if i in kept:
+            return kept.pop(i)
         if read_frame is None:
             return seq[i]
         return read_frame(i, depth=init_depth and (realtime or i == start))
@@ -471,23 +404,37 @@ def _track_sequence(
     results: list[VOResult] = []
     halted_by: BaseException | None = None
     stops = _StopBetweenFrames().__enter__()
-    frames: _Prefetched | _Realtime = (
-        _Realtime(seq, read, start, stop, live, prepare_grabbed, lambda: stops.pending is not None) if realtime
-        else _Prefetched(load, start, stop)
+    frames: PrefetchedFrames | RealtimeFrames = (
+        RealtimeFrames(seq, read, start, stop, live, prepare_grabbed, lambda: stops.pending is not None,
+                       lambda: kept.pop(start, None)) if realtime
+        else PrefetchedFrames(load, start, stop)
     )
+    run_start = RunStart(camera, configs, parallel=vos[0].parallel)
     t_start = time.perf_counter()
     try:
-        if warmup:
-            compile_s = sum(warm_up(feat, c) for c in configs)
-        t_start = time.perf_counter()
+        # the geometric start (OpenCV, numpy: mostly without the GIL) reads the first frames beside the warm-up;
+        # what it takes beyond the warm-up counts in wall_s
+        with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start") as pool:
+            starting = pool.submit(_start, run_start, read, kept, box, start, stop, stops)
+            try:
+                if warmup:
+                    compile_s = sum(warm_up(feat, c) for c in configs)
+            finally:
+                t_start = time.perf_counter()
+                starting.result()
+        for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in configs) if r):  # metrics.json has it
+            warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=5)
+        vos = [vo if c is vo.config else VisualOdometry(camera, c, sink=vo.sink)
+               for vo, c in ((vo, run_start.config_for(vo.config)) for vo in vos)]
+        maps = [run_start.initial_map(c) for c in configs]
         bar = _progress(None if stop is None else stop - start, seq.name, feat.name, progress)
         # a signal during the warm-up stops the run before its first frame
         for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames if stops.pending is None else ():
             t_io += dt_io
             t_feat += dt_feat
-            for vo in vos:
+            for vo, m in zip(vos, maps, strict=True):
                 if not vo.stopped:
-                    vo.process(i, timestamp, image, fmap, depth)
+                    vo.process(i, timestamp, image, fmap, depth, m if i == start else None)
             image = fmap = depth = None  # not kept while the next frame is awaited (157 MB for dense SIFT)
             if bar is not None:
                 bar.update(i + 1 - start - bar.n)
@@ -553,10 +500,27 @@ def _track_sequence(
             dropped_frames=int(frames.dropped),
             realtime=bool(realtime),
             compile_s=compile_s,
+            init=run_start.metrics(config),
         )
         result.metrics = metrics_dict(result, seq, feat, config, camera, start, r_l)
         out.append(result)
     return out
+
+
+def _start(
+    run_start: RunStart, read: Any, kept: dict[int, Any], box: Any, start: int, stop: int | None, stops: Any
+) -> None:
+    """Feed the run's first frames to its geometric starts (if any) until each has accepted or refused; the frames
+    read are kept in ``kept`` for the odometry."""
+    i = start
+    while run_start.collecting and (stop is None or i < stop) and stops.pending is None:
+        try:
+            frame = kept[i] = read(i)
+        except EndOfStream:  # a live source ended
+            break
+        run_start.add(i, frame.timestamp, crop_image(frame.image, box))
+        i += 1
+    run_start.end(i - start)
 
 
 def _for_feature(config: VOConfig, feat: Any) -> VOConfig:
@@ -728,6 +692,7 @@ def metrics_dict(
         "info_channels": _finite(config.info_channels),
         "noise_energy_channels": _finite(config.noise_energy_channels),
         "r_l": r_l,
+        **(result.init or {"init": config.init}),
         "dmtrack_version": __version__,
         **kernel_target(),
     }
@@ -776,9 +741,7 @@ def run_to_directory(
 
     out = prepare_folder(out_dir)  # before any frame: an --out that is a file fails here, in one line
     (out / "metrics.json").unlink(missing_ok=True)  # a stale metrics.json must not describe this run
-    config = config or VOConfig()
-    if kwargs.get("seed") is not None:
-        config = config.with_overrides(f"seed={int(kwargs.pop('seed'))}")
+    config = _with_start(config or VOConfig(), kwargs.pop("seed", None), kwargs.pop("init", None))
     write_text(out / "config.yaml", yaml.safe_dump(_plain(config.to_dict()), sort_keys=False))
     (out / "groundtruth.txt").unlink(missing_ok=True)  # a stale one must not describe this run
     files = RunDirectorySink(out, depth_images=depth_images, pointcloud=pointcloud)

@@ -158,7 +158,9 @@ def test_run_report_shows_the_metrics_and_is_self_contained(run_dir: Path):
     # the keyframe depth pictures: embedded, scaled down to 320 pixels wide, one per keyframe up to 12
     n_kf = len(list((run_dir / "depth").glob("kf_*.png")))
     uris = [a["src"] for t, a in doc.tags if t == "img"]
-    assert len(uris) == min(n_kf, MAX_DEPTH_PICTURES) >= 1
+    assert (run_dir / "depth" / "initial_map.png").is_file()  # the first map as the start made it, shown first
+    assert len(uris) == 1 + min(n_kf, MAX_DEPTH_PICTURES) >= 2
+    assert f"initial map ({m['init']}" in text
     for uri in uris:
         assert uri.startswith("data:image/png;base64,")
         img = cv2.imdecode(np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8), cv2.IMREAD_COLOR)

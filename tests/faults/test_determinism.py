@@ -26,8 +26,11 @@ def _digest(out: Path) -> str:
     return h.hexdigest()
 
 
-@pytest.mark.parametrize("feature", ["gray", "rgb", "bitplanes"])
-def test_same_input_same_bytes_any_thread_count(tmp_path: Path, feature: str, fault_log,
+@pytest.mark.parametrize(
+    ("feature", "init", "frames"),
+    [("gray", "random", 24), ("rgb", "random", 24), ("bitplanes", "random", 24), ("gray", "geometric", 56)],
+)
+def test_same_input_same_bytes_any_thread_count(tmp_path: Path, feature: str, init: str, frames: int, fault_log,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     import numba
 
@@ -39,12 +42,14 @@ def test_same_input_same_bytes_any_thread_count(tmp_path: Path, feature: str, fa
             monkeypatch.setenv("DMTRACK_FEATURE_THREADS", str(threads))  # feature extraction
             numba.set_num_threads(threads)  # tracking and mapping kernels
             out = tmp_path / f"t{threads}-{len(digests)}"
-            run_to_directory(SAMPLE, out, feature=feature, max_frames=24, seed=1, depth_images=False)
+            run_to_directory(SAMPLE, out, feature=feature, max_frames=frames, seed=1, init=init, depth_images=False)
             digests.append(_digest(out))
+            if init == "geometric":  # the start accepted (OpenCV's corners, KLT and RANSAC, any thread count)
+                assert json.loads((out / "metrics.json").read_text())["init_accepted_frame"] is not None
     finally:
         numba.set_num_threads(before)
     assert len(set(digests)) == 1
-    fault_log.tried("determinism", f"{feature}: repeated runs, 1 and 2 threads", n=len(digests))
+    fault_log.tried("determinism", f"{feature} ({init} start): repeated runs, 1 and 2 threads", n=len(digests))
 
 
 def test_metrics_record_the_kernel_target(tmp_path: Path) -> None:
@@ -62,3 +67,34 @@ def test_kernel_target_follows_numba_cpu_name(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.delenv("NUMBA_CPU_FEATURES", raising=False)
     assert kernel_target()["kernel_target"] == "generic"
     assert kernel_target()["simd"] == "baseline"
+
+
+_START_DIGEST = """
+import hashlib
+from dmtrack.datasets.synthetic.sequence import SyntheticConfig, SyntheticSequence
+from dmtrack.initialization import GeometricInitializer
+seq = SyntheticSequence(SyntheticConfig(width=320, height=240, n_frames=25, seed=1, texel=0.02))
+start = GeometricInitializer(seq.camera)
+for i in range(25):
+    if start.add(i, seq[i].timestamp, seq[i].image):
+        break
+m = start.initial_map
+print(hashlib.sha256(m.idepth.tobytes() + m.idepth_var.tobytes() + m.valid.tobytes()).hexdigest())
+"""
+
+
+def test_the_geometric_start_gives_the_same_bits_whatever_the_blas_threads(fault_log) -> None:
+    """The bundle adjustment's sums must not follow the BLAS thread count (a multi-threaded matrix product splits its
+    sums by thread): bench workers run with one BLAS thread, an interactive run with all of them."""
+    import os
+    import subprocess
+    import sys
+
+    digests = set()
+    for n in ("1", "2"):
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": n, "OMP_NUM_THREADS": n, "MKL_NUM_THREADS": n}
+        out = subprocess.run([sys.executable, "-c", _START_DIGEST], env=env, capture_output=True, text=True,
+                             check=True)
+        digests.add(out.stdout.strip().splitlines()[-1])
+    assert len(digests) == 1
+    fault_log.tried("determinism", "geometric start: 1 and 2 BLAS threads", n=2)

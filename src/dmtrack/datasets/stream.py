@@ -345,3 +345,54 @@ class FrameGrabber:
         if self._thread.is_alive():
             self._thread.join(timeout)
         return not self._thread.is_alive()
+
+
+class RealtimeFrames:
+    """The newest frame of a :class:`~dmtrack.datasets.stream.FrameGrabber` (reading frames with ``read(i)``) each
+    time the odometry is ready; ``prepare`` (crop + feature) runs on the calling thread. Stops when the grabber ends
+    or ``should_stop()``.
+
+    ``first`` (optional) gives frame ``start`` when the iteration begins — a frame read already (the geometric start
+    read the first frames, and the odometry must begin with the frame its map belongs to) — or None; that frame is
+    delivered first, never dropped, and the grabber begins after it."""
+
+    def __init__(
+        self, seq: Any, read: Any, start: int, stop: int | None, live: bool, prepare: Any, should_stop: Any,
+        first: Callable[[], Frame | None] | None = None,
+    ) -> None:  # fmt: skip
+        self._read, self._start, self._stop = read, start, stop
+        self._times = None if live else seq.timestamps
+        self._grabber: FrameGrabber | None = None
+        self._prepare = prepare
+        self._should_stop = should_stop
+        self._first = first
+        self._given = 0  # frames delivered besides the grabber's
+
+    @property
+    def delivered(self) -> int:
+        return self._given + (0 if self._grabber is None else self._grabber.delivered)
+
+    @property
+    def dropped(self) -> int:
+        return 0 if self._grabber is None else self._grabber.dropped
+
+    def __iter__(self) -> Any:
+        start = self._start
+        frame = None if self._first is None else self._first()
+        if frame is not None:
+            self._given = 1
+            yield start, self._prepare(frame, 0.0)
+            start += 1
+        self._grabber = FrameGrabber(self._read, start, self._stop, self._times).start()
+        while True:
+            item = self._grabber.take(timeout=0.05)
+            if item is None:
+                if self._grabber.finished or self._should_stop():
+                    return
+                continue
+            i, frame, read_s = item
+            yield i, self._prepare(frame, read_s)
+
+    def close(self) -> None:
+        if self._grabber is not None:
+            self._grabber.close()

@@ -115,6 +115,11 @@ def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
         metavar="FX,FY,CX,CY",
         help="pinhole intrinsics (of --sequences; default for sequences-file entries without them)",
     )
+    p.add_argument(
+        "--init",
+        choices=("random", "geometric", "groundtruth"),
+        help="how every run's first keyframe map is made (default: the configuration's; docs/initialization.md)",
+    )
     p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
     p.add_argument(
         "--set",
@@ -208,8 +213,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         config = VOConfig.from_yaml(args.config)
     overrides = list(args.set)
+    if args.init:
+        overrides.append(f"init={args.init}")
     if args.continue_after_loss:
         overrides.append("stop_on_loss=false")
+    if seeds and len(seeds) > 1:
+        from dmtrack.odometry.config import VOConfig
+
+        if (config or VOConfig()).with_overrides(*overrides).init == "geometric":
+            print("dmtrack bench: with the geometric start (the default) the seed plays no part: every seed gives the "
+                  "same run; add --init random to compare the random starts", file=sys.stderr)
     jobs = args.jobs if args.jobs is not None else max(1, _usable_cpus() // args.threads_per_job)
     n_seeds = len(seeds) if seeds else 1
     jobs = min(jobs, len(sequences) * len(features) * n_seeds) if jobs > 0 else 0

@@ -41,8 +41,9 @@ class MemorySink:
 class MultiSink:
     """Forwards every call to each of ``sinks`` in order.
 
-    The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers) exists only when at
-    least one of ``sinks`` has it, and goes to those; so a fan-out to sinks without it costs the odometry nothing.
+    The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers) and ``on_initial_map``
+    exist only when at least one of ``sinks`` has them, and go to those; so a fan-out to sinks without them costs the
+    odometry nothing.
     The children are fixed when the MultiSink is made.
     """
 
@@ -51,6 +52,13 @@ class MultiSink:
         self._info_sinks = [s for s in self.sinks if callable(getattr(s, "on_frame_info", None))]
         if self._info_sinks:
             self.on_frame_info = self._forward_frame_info
+        self._map_sinks = [s for s in self.sinks if callable(getattr(s, "on_initial_map", None))]
+        if self._map_sinks:
+            self.on_initial_map = self._forward_initial_map
+
+    def _forward_initial_map(self, snapshot: KeyframeSnapshot) -> None:
+        for s in self._map_sinks:
+            s.on_initial_map(snapshot)  # type: ignore[attr-defined]
 
     def _forward_frame_info(self, info: FrameInfo) -> None:
         for s in self._info_sinks:

@@ -17,6 +17,9 @@ or absent; open it with ``rerun FILE``), or to both.
                                    when its depth map is final
 ``keyframe/depth``                 the current keyframe's inverse depth over its image, coloured as
                                    :func:`dmtrack.viz.depth.inverse_depth_image` (per frame, downscaled)
+``world/initial_map``, ``keyframe/initial_map``  the first keyframe's map as the start made it (random, geometric,
+                                   ground truth): its points, and its inverse depth over the image (optional
+                                   sink method ``on_initial_map``)
 ``stats/…``                        per frame: the tracker's ``residual``, ``points`` (good, bad),
                                    ``point_usage``, and ``keyframe_id``
 ``timing``                         per frame, ms: pyramid, tracking, mapping, odometry (their sum) and frame
@@ -87,7 +90,10 @@ def blueprint(rr: Any, live: bool = True) -> Any:
     if live:
         side = [
             rrb.Spatial2DView(origin="world/camera/image", name="frame"),
-            rrb.Spatial2DView(origin="keyframe/depth", name="keyframe inverse depth"),
+            rrb.Tabs(
+                rrb.Spatial2DView(origin="keyframe/depth", name="keyframe inverse depth"),
+                rrb.Spatial2DView(origin="keyframe/initial_map", name="initial map"),
+            ),
             rrb.Tabs(
                 rrb.TimeSeriesView(origin="stats/residual", name="residual"),
                 rrb.TimeSeriesView(origin="stats/points", name="points"),
@@ -99,7 +105,10 @@ def blueprint(rr: Any, live: bool = True) -> Any:
         ]
     else:
         side = [
-            rrb.Spatial2DView(origin="keyframe/depth", name="keyframe inverse depth"),
+            rrb.Tabs(
+                rrb.Spatial2DView(origin="keyframe/depth", name="keyframe inverse depth"),
+                rrb.Spatial2DView(origin="keyframe/initial_map", name="initial map"),
+            ),
             rrb.Tabs(
                 rrb.TextDocumentView(origin="run/metrics", name="metrics"),
                 rrb.TextDocumentView(origin="run/config", name="config"),
@@ -410,6 +419,19 @@ class RerunSink:
         self.n_keyframes += 1
         self.n_points += len(pts)
         self._log_groundtruth()
+
+    def on_initial_map(self, snapshot: KeyframeSnapshot) -> None:
+        """The first keyframe's map as the start made it: its points and its inverse depth over the image."""
+        rr = self.rr
+        self._at(snapshot.frame_index, snapshot.timestamp)
+        pts, cols = snapshot.points_world(self.max_point_var)
+        self.stream.log("world/initial_map", rr.Points3D(pts.astype(np.float32), colors=cols))
+        if snapshot.image is not None:
+            k = self.image_downscale
+            overlay = inverse_depth_image(snapshot.idepth[::k, ::k], snapshot.valid[::k, ::k], snapshot.image[::k, ::k])
+            self.stream.log("keyframe/initial_map", jpeg(rr, overlay, self.jpeg_quality))
+        self.stream.log("log", rr.TextLog(f"initial map (frame {snapshot.frame_index}): {len(pts)} points",
+                                          level=rr.TextLogLevel.INFO))
 
     def on_lost(self, frame_index: int, reason: str) -> None:
         self.stream.set_time("frame", sequence=int(frame_index))

@@ -11,6 +11,7 @@ with the entity paths of the live :class:`~dmtrack.outputs.rerun_sink.RerunSink`
 ``world/keyframes``               the keyframe positions of ``keyframes.txt``
 ``world/points``                  ``pointcloud.ply`` (all keyframes, world frame)
 ``keyframe/depth``                ``depth/kf_*.png``, each at its keyframe's frame
+``keyframe/initial_map``          ``depth/initial_map.png``: the first keyframe's map as the start made it
 ``run/metrics``, ``run/config``   ``metrics.json`` as a table and ``config.yaml``
 ================================  =====================================================================================
 
@@ -134,6 +135,8 @@ def log_run_folder(
             continue
         k = int(np.argmin(np.abs(traj.timestamps - kfs.timestamps[int(m.group(1))])))  # the keyframe's pose
         depth.append((int(frames[k]), k, read_bytes(png, "depth picture")))
+    initial_png = run / "depth" / "initial_map.png"
+    initial = read_bytes(initial_png, "depth picture") if initial_png.is_file() else None
     gt_positions = None if gt is None or align is None else aligned_groundtruth(
         traj.timestamps, traj.positions, gt, align
     )  # fmt: skip
@@ -174,6 +177,8 @@ def log_run_folder(
                 ],
                 columns=rr.EncodedImage.columns(blob=[d[2] for d in depth], media_type=["image/png"] * len(depth)),
             )
+        if initial is not None:
+            stream.log("keyframe/initial_map", rr.EncodedImage(contents=initial, media_type="image/png"), static=True)
         if metrics:
             table = rr.TextDocument(_markdown_table(metrics), media_type="text/markdown")
             stream.log("run/metrics", table, static=True)
@@ -190,6 +195,7 @@ def log_run_folder(
         "keyframes": len(kfs),
         "points": 0 if points is None else len(points),
         "depth_images": len(depth),
+        "initial_map": initial is not None,
         "frames_are_indices": are_indices,
         "groundtruth": "none" if gt is None else "aligned" if gt_positions is not None else "not aligned",
     }

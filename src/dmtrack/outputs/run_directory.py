@@ -9,7 +9,9 @@
                        keyframe's); ``pointcloud.ply`` appears, atomically, when the run closes, also after a
                        tracking loss or an interrupt (:class:`~dmtrack.io.ply.PlyStream`).
 ``depth/``             one picture per keyframe: inverse depth over the dimmed image, negative inverse
-                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically.
+                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically;
+                       and ``initial_map.png``, the first keyframe's map as the start left it (random, geometric
+                       or ground truth), before any frame was mapped into it.
 ``metrics.json``       written by the caller (:func:`dmtrack.pipeline.run_to_directory`), not by the sink.
 =====================  =====================================================================================
 
@@ -33,6 +35,8 @@ from dmtrack.odometry.sink import KeyframeSnapshot
 from dmtrack.viz.depth import inverse_depth_image, write_png
 
 TUM_HEADER = "# timestamp tx ty tz qx qy qz qw  (camera-to-world, TUM format)\n"
+#: The picture of the first keyframe's map as the start made it, in ``depth/``.
+INITIAL_MAP_PNG = "initial_map.png"
 
 
 class _LineFile:
@@ -86,7 +90,7 @@ class RunDirectorySink:
         if depth_images:
             prepare_folder(self.depth_dir)
             remove_stale_temporaries(self.depth_dir)
-            for old in self.depth_dir.glob("kf_*.png"):
+            for old in [*self.depth_dir.glob("kf_*.png"), *self.depth_dir.glob(INITIAL_MAP_PNG)]:
                 old.unlink()
         self._traj = _LineFile(self.out_dir / "trajectory.txt")
         self._kfs = _LineFile(self.out_dir / "keyframes.txt")
@@ -122,6 +126,12 @@ class RunDirectorySink:
         if self.depth_images and snap.image is not None:
             picture = inverse_depth_image(snap.idepth, snap.valid, snap.image)
             write_png(self.depth_dir / f"kf_{keyframe_id:04d}_frame_{frame_index:06d}.png", picture)
+
+    def on_initial_map(self, snapshot: KeyframeSnapshot) -> None:
+        """The first keyframe's map as the start made it: ``depth/initial_map.png``."""
+        if self.depth_images and snapshot.image is not None:
+            picture = inverse_depth_image(snapshot.idepth, snapshot.valid, snapshot.image)
+            write_png(self.depth_dir / INITIAL_MAP_PNG, picture)
 
     def on_lost(self, frame_index: int, reason: str) -> None:
         self.lost.append((frame_index, reason))

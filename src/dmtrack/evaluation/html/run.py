@@ -275,12 +275,20 @@ def _depth_pictures(page: Page, folder: Path) -> None:
         if mt:
             found.append((int(mt.group(2)), int(mt.group(1)), p))
     page.heading(2, "Keyframe depth", toc=True)
-    if not found:
+    initial = folder / "depth" / "initial_map.png"
+    if not found and not initial.is_file():
         page.text("No keyframe depth pictures (depth/ is empty or missing: run without --no-depth-images).", "note")
         return
     found.sort()
     pick = np.unique(np.linspace(0, len(found) - 1, min(MAX_DEPTH_PICTURES, len(found))).round().astype(int))
     cells = []
+    if initial.is_file():
+        try:
+            uri = png_data_uri(initial, DEPTH_PICTURE_WIDTH)
+            cells.append(f'<figure><img src="{uri}" alt="initial_map.png" width="{DEPTH_PICTURE_WIDTH}">'
+                         f"<figcaption>initial map ({esc(_start_caption(folder))})</figcaption></figure>")
+        except ValueError as e:
+            page.problem("depth/initial_map.png", e)
     for i in pick:
         frame, kf, path = found[int(i)]
         try:
@@ -291,9 +299,24 @@ def _depth_pictures(page: Page, folder: Path) -> None:
         cells.append(f'<figure><img src="{uri}" alt="{esc(path.name)}" width="{DEPTH_PICTURE_WIDTH}">'
                      f"<figcaption>keyframe {kf} (frame {frame})</figcaption></figure>")  # fmt: skip
     page.add('<div class="pictures">' + "".join(cells) + "</div>")
-    page.text(f"Inverse depth of {len(cells)} of the run's {len(found)} keyframes (evenly spaced; scaled down to "
-              f"{DEPTH_PICTURE_WIDTH} pixels wide) over the dimmed image: red near, blue far; magenta marks negative "
-              "inverse depths.", "caption")  # fmt: skip
+    page.text(f"Inverse depth of {len(pick) if found else 0} of the run's {len(found)} keyframes (evenly spaced; "
+              f"scaled down to {DEPTH_PICTURE_WIDTH} pixels wide) over the dimmed image: red near, blue far; magenta "
+              "marks negative inverse depths. The first picture is the first keyframe's map as the start made it, "
+              "before any frame was mapped into it.", "caption")  # fmt: skip
+
+
+def _start_caption(folder: Path) -> str:
+    """How the first map was made, from ``metrics.json``: e.g. "geometric, accepted at frame 41"."""
+    try:
+        m = read_metrics(folder)
+    except InputError:
+        return "how it was made is not recorded"
+    init = m.get("init") or "random"
+    if m.get("init_fallback"):
+        return f"{init} refused: {m['init_fallback']}"
+    if m.get("init_accepted_frame") is not None:
+        return f"{init}, accepted at frame {m['init_accepted_frame']}"
+    return f"{init}, seed {m['seed']}" if init == "random" and "seed" in m else str(init)
 
 
 def run_page(folder: Path, page: Page) -> str:

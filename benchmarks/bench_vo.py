@@ -78,7 +78,7 @@ def staged_run(sequence: str, feature_name: str, frames: int) -> tuple[dict[str,
 
     seq = open_sequence(sequence)
     feat = get_feature(feature_name)
-    config = VOConfig()
+    config = VOConfig(init="random")  # the odometry alone
     if getattr(feat, "affine_brightness", False):
         config = config.with_overrides("tracker.affine=true")
     camera, box = seq.camera.crop_to_multiple(16)

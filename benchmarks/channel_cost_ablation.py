@@ -51,7 +51,7 @@ def _job(job: tuple) -> list[dict]:
     from dmtrack.odometry.config import VOConfig
 
     keys = [(v, s) for v in variants for s in seeds]
-    configs = [VOConfig().with_overrides(*variants[v], f"seed={s}") for v, s in keys]
+    configs = [VOConfig(init="random").with_overrides(*variants[v], f"seed={s}") for v, s in keys]
     t0 = time.perf_counter()
     results = track_many(path, feature, configs, max_frames=max_frames, r_l=r_l, **opts)
     wall = time.perf_counter() - t0

@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         return res
 
     tracker_mod.Tracker._track = instrumented
-    config = VOConfig().with_overrides(*a.set, f"seed={a.seed}")
+    config = VOConfig(init="random").with_overrides(*a.set, f"seed={a.seed}")
     kw = {"intrinsics": a.intrinsics} if a.intrinsics else {}
     if a.r_l:
         kw["r_l"] = a.r_l

@@ -104,7 +104,7 @@ def _config(feat: Any) -> Any:
     brightness, the feature's measured energy/information channel counts of the multichannel cost rule)."""
     from dmtrack.odometry.config import VOConfig
 
-    config = VOConfig()
+    config = VOConfig(init="random")  # the odometry alone
     try:
         from dmtrack.pipeline import _for_feature
     except ImportError:  # an older tree

@@ -10,6 +10,7 @@
 #   * Tsukuba: its image folder has no intrinsics → 615,615,320,240 (New Tsukuba), r_l = 1/20 (paper §3.1),
 #     ground truth in centimetres (errors are reported in deg/cm);
 #   * KITTI: r_l = 1/20.
+# The start is the paper's (--init random, seeded random first map); pass --init geometric for dmtrack's default.
 # Environment: DMTRACK_SHARED (default REPO/../shared), JOBS (default: all CPUs), PYTHON (default REPO/.venv).
 # Resumable: running it again skips the runs already finished with the same settings; `dmtrack report OUT_DIR`
 # rebuilds OUT_DIR/report.md alone.  Add --scheduler tcp://HOST:8786 to run it on a Dask cluster (OUT_DIR and
@@ -48,4 +49,5 @@ exec "$PYTHON" -m dmtrack.cli bench \
   --features gray gray-affine bitplanes dsift \
   --out "$OUT" \
   --jobs "$JOBS" \
+  --init random \
   "$@"

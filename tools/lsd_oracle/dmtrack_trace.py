@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 
     seq = open_sequence(a.sequence, intrinsics=a.intrinsics)
     camera, box = seq.camera.crop_to_multiple(16)
-    cfg = VOConfig().with_overrides(f"seed={a.seed}", *a.set)
+    cfg = VOConfig(init="random").with_overrides(f"seed={a.seed}", *a.set)
     vo = VisualOdometry(camera, cfg, threads=1)
     feat = get_feature("gray")
     n = len(seq) if a.end is None else min(a.end, len(seq))

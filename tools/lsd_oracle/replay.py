@@ -162,7 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     seq = open_sequence(a.sequence)
     camera, box = seq.camera.crop_to_multiple(16)
     h, w = camera.height, camera.width
-    cfg = VOConfig().with_overrides("depth.update_variance=smoothed", *a.set)  # LSD-SLAM's rule unless overridden
+    # LSD-SLAM's rule and its random start unless overridden
+    cfg = VOConfig(init="random").with_overrides("depth.update_variance=smoothed", *a.set)
     dump = Path(a.dump)
 
     def frame(i: int):

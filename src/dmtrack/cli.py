@@ -136,6 +136,16 @@ def _limit_threads(threads: int | None) -> None:
     limit_threads(threads)
 
 
+def _slam_line(m: dict) -> str:
+    if m.get("slam_error"):
+        return f"slam: the back end failed ({m['slam_error']}); trajectory.txt is the odometry's"
+    line = (f"slam: {m['loop_closures']} loop closures ({m['loop_candidates_tested']} candidates tested), "
+            f"{m['graph_edges']} graph edges, optimisation {m['optimisation_ms']:.0f} ms")
+    if m.get("vo_ate_rmse") is not None:
+        line += f"; odometry alone: ATE {m['vo_ate_rmse']:.4f}, RPE rotation {m['vo_rpe_rot_deg_per_m']:.3f} deg/unit"
+    return line
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -172,6 +182,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress=None if args.progress is None else args.progress,
             extra_sinks=viewers,
             realtime=args.realtime,
+            slam=args.slam or None,
         )
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the finished frames and their metrics are saved
         print(f"dmtrack: {_interrupt_text(e)}: the trajectory and metrics of the finished frames are in {out}/",
@@ -199,6 +210,8 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"(Sim3), {m['matched_poses']} poses")
     elif "evaluation_error" in m:
         print(f"accuracy: not evaluated ({m['evaluation_error']})")
+    if m.get("slam"):
+        print(_slam_line(m))
     print(f"outputs: {out}/" + (f", recording: {args.rrd}" if args.rrd else ""))
     return 0
 
@@ -414,6 +427,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="first keyframe's depth: seeded random (the paper's), geometric (from the first frames' own "
                         "motion: tracked corners, essential matrix, bundle adjustment, stereo) or the dataset's depth "
                         "image (docs/initialization.md)")
+    p.add_argument("--slam", action="store_true",
+                   help="SLAM: a keyframe graph with loop closures (Sim(3) alignment on the feature), optimised by "
+                        "gtsam; trajectory.txt is the optimised one, the odometry's is trajectory_vo.txt "
+                        "(pip install 'dmtrack[slam]'; docs/slam.md)")
     p.add_argument("--continue-after-loss", action="store_true",
                    help="keep going after a tracking loss (default: stop there, as the paper counts tracked frames)")
     p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png")

@@ -72,6 +72,8 @@ class RunDirectorySink:
     pointcloud : write ``pointcloud.ply``.
     max_point_var : keep only points whose inverse-depth variance is at most this (keyframe units);
         ``None`` keeps every hypothesis.
+    suffix : appended to the names of ``trajectory``, ``keyframes`` and ``pointcloud`` (``"_vo"`` for a SLAM run,
+        whose plain names hold the optimised results; :mod:`dmtrack.outputs.slam_files`).
     """
 
     def __init__(
@@ -80,6 +82,7 @@ class RunDirectorySink:
         depth_images: bool = True,
         pointcloud: bool = True,
         max_point_var: float | None = None,
+        suffix: str = "",
     ) -> None:
         self.out_dir = prepare_folder(out_dir)
         remove_stale_temporaries(self.out_dir)
@@ -92,11 +95,11 @@ class RunDirectorySink:
             remove_stale_temporaries(self.depth_dir)
             for old in [*self.depth_dir.glob("kf_*.png"), *self.depth_dir.glob(INITIAL_MAP_PNG)]:
                 old.unlink()
-        self._traj = _LineFile(self.out_dir / "trajectory.txt")
-        self._kfs = _LineFile(self.out_dir / "keyframes.txt")
+        self._traj = _LineFile(self.out_dir / f"trajectory{suffix}.txt")
+        self._kfs = _LineFile(self.out_dir / f"keyframes{suffix}.txt")
         self._traj.write(TUM_HEADER)
         self._kfs.write(TUM_HEADER)
-        self._cloud = PlyStream(self.out_dir / "pointcloud.ply") if pointcloud else None
+        self._cloud = PlyStream(self.out_dir / f"pointcloud{suffix}.ply") if pointcloud else None
         self._cloud_error: OutputError | None = None  # the first keyframe whose points could not be written
         self.n_frames = 0
         self.n_keyframes = 0

@@ -1,0 +1,190 @@
+"""What a run produced (:class:`RunResult`) and its ``metrics.json`` (:func:`metrics_dict`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dmtrack import __version__
+from dmtrack.datasets.base import Sequence
+from dmtrack.errors import DmtrackError, Interrupted, OutputError
+from dmtrack.geometry.camera import PinholeCamera
+from dmtrack.io.trajectory import Trajectory
+from dmtrack.odometry._fastmath import kernel_target
+from dmtrack.odometry.config import VOConfig
+from dmtrack.odometry.vo import VOResult
+
+#: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
+R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
+DEFAULT_R_L = 1.0 / 3.0
+
+
+@dataclass
+class RunResult:
+    """Everything a run produced.
+
+    Attributes
+    ----------
+    trajectory : tracked frames' T_wc with the dataset's timestamps.
+    keyframes : keyframes' T_wc.
+    frame_indices : dataset frame index of each trajectory pose.
+    total_frames, tracked_frames : frames given to the odometry, frames with a pose.
+    lost_at, lost_reason : first frame (dataset index) where tracking was lost, and why; ``None`` if never.
+    timings_ms : mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction) — both measured on
+        the prefetch thread, where they overlap with the odometry of earlier frames — ``pyramid``,
+        ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
+    metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
+    vo : the odometry's own summary.
+    groundtruth : the sequence's ground truth over the frames given to the odometry (``None`` without one);
+        written as ``groundtruth.txt`` by :func:`run_to_directory`.
+    halted_by : why the run stopped before its last frame other than a tracking loss — an interrupt
+        (:class:`KeyboardInterrupt`, :class:`~dmtrack.errors.Interrupted` for SIGTERM) or an output that could
+        not be written (:class:`~dmtrack.errors.OutputError`); ``None`` for a run that went to its end.
+        :func:`track` and :func:`run_to_directory` re-raise it once the finished frames are saved.
+    dropped_frames : frames of a ``realtime`` run that the odometry skipped because a newer one had come.
+    realtime : whether the run was a ``realtime`` one.
+    compile_s : seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
+        0 when this process had warmed up the feature and configuration already, or without warm-up).
+    init : how the first map was made: ``metrics.json``'s ``init*`` keys
+        (:meth:`~dmtrack.initialization.run_start.RunStart.metrics`).
+    slam : the SLAM back end of a ``slam=`` run (:class:`~dmtrack.slam.backend.ThreadedSlam`), else ``None``;
+        ``trajectory`` is then its optimised trajectory (the odometry's when the back end failed:
+        ``slam.error``), and ``vo_trajectory`` the odometry's.
+    """
+
+    trajectory: Trajectory
+    keyframes: Trajectory
+    frame_indices: np.ndarray
+    total_frames: int
+    tracked_frames: int
+    lost_at: int | None
+    lost_reason: str | None
+    timings_ms: dict[str, float]
+    metrics: dict[str, Any] = field(default_factory=dict)
+    vo: VOResult | None = None
+    groundtruth: Trajectory | None = None
+    halted_by: BaseException | None = None
+    dropped_frames: int = 0
+    realtime: bool = False
+    compile_s: float = 0.0
+    init: dict[str, Any] = field(default_factory=dict)
+    slam: Any = None
+    vo_trajectory: Trajectory | None = None
+
+
+def _finite(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _interrupt_name(e: BaseException | None) -> str | None:
+    if isinstance(e, Interrupted):
+        return e.signal_name
+    return "SIGINT" if isinstance(e, KeyboardInterrupt) else None
+
+
+def _groundtruth_span(seq: Sequence, start: int, stop: int) -> Trajectory | None:
+    """The ground-truth poses timed within the frames ``start … stop − 1`` (± 1 µs), or ``None``."""
+    gt = seq.groundtruth
+    if gt is None or len(gt) == 0 or stop <= start:
+        return None
+    times = np.asarray(seq.timestamps[start:stop], dtype=np.float64)
+    keep = (gt.timestamps >= times.min() - 1e-6) & (gt.timestamps <= times.max() + 1e-6)
+    return gt[np.nonzero(keep)[0]] if keep.any() else None
+
+
+def metrics_dict(
+    result: RunResult,
+    seq: Sequence,
+    feature: Any,
+    config: VOConfig,
+    camera: PinholeCamera,
+    start: int,
+    r_l: float,
+) -> dict[str, Any]:
+    """The ``metrics.json`` contents (keys of conventions.md, plus more).
+
+    ``fps`` is frames processed per second of the whole loop (reading, features, tracking, mapping), and
+    ``compile_s`` the seconds before it spent compiling or loading the kernels (:func:`warm_up`);
+    ``dropped_frames`` counts the frames a ``realtime`` run skipped (0 otherwise);
+    ``*_ms`` are means per processed frame; ``feature_ms`` includes building the feature pyramid.
+    RPE values are per unit of the ground truth's length (metres for every real dataset here; centimetres for
+    New Tsukuba).
+    """
+    t = result.timings_ms
+    processed = result.vo.total_frames if result.vo is not None else result.total_frames
+    m: dict[str, Any] = {
+        "feature": getattr(feature, "name", str(feature)),
+        "sequence": seq.name,
+        "format": seq.format,
+        "total_frames": int(result.total_frames),
+        "tracked_frames": int(result.tracked_frames),
+        "lost_at": None if result.lost_at is None else int(result.lost_at),
+        "lost_reason": result.lost_reason,
+        "processed_frames": int(processed),
+        "dropped_frames": int(result.dropped_frames),
+        "realtime": bool(result.realtime),
+        "interrupted": _interrupt_name(result.halted_by),
+        "output_error": str(result.halted_by) if isinstance(result.halted_by, OutputError) else None,
+        "fps": _finite(processed / t["wall_s"]) if t["wall_s"] > 0 else None,
+        "feature_ms": t["feature"] + t["pyramid"],
+        "tracking_ms": t["tracking"],
+        "mapping_ms": t["mapping"],
+        "io_ms": t["io"],
+        "pyramid_ms": t["pyramid"],
+        "wall_s": t["wall_s"],
+        "compile_s": float(result.compile_s),
+        "keyframes": len(result.keyframes),
+        "start": int(start),
+        "width": camera.width,
+        "height": camera.height,
+        "channels": int(getattr(feature, "channels", 0)),
+        "feature_scale": _finite(getattr(feature, "scale", None)),
+        "seed": int(config.seed),
+        "channel_cost": config.channel_cost,
+        "energy_channels": _finite(config.energy_channels),
+        "info_channels": _finite(config.info_channels),
+        "noise_energy_channels": _finite(config.noise_energy_channels),
+        "r_l": r_l,
+        **(result.init or {"init": config.init}),
+        "dmtrack_version": __version__,
+        **kernel_target(),
+    }
+    if result.slam is not None:
+        m.update(_slam_metrics(result.slam))
+    gt = seq.groundtruth
+    if gt is not None:
+        from dmtrack.evaluation import evaluate
+
+        try:
+            ev = evaluate(gt, result.trajectory, max_diff=0.01, r_l=r_l, align="sim3")
+            for k in ("ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "matched_poses", "ate_scale"):
+                m[k] = ev[k]
+            if result.slam is not None and result.vo_trajectory is not None:
+                ev = evaluate(gt, result.vo_trajectory, max_diff=0.01, r_l=r_l, align="sim3")
+                for k in ("ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m"):
+                    m[f"vo_{k}"] = ev[k]
+        except (DmtrackError, ValueError) as e:
+            m.update(ate_rmse=None, rpe_rot_deg_per_m=None, rpe_trans_angle_deg_per_m=None, matched_poses=0)
+            m["evaluation_error"] = str(e)
+    return m
+
+
+def _slam_metrics(slam: Any) -> dict[str, Any]:
+    """``slam``, ``loop_closures``, ``graph_edges``, ``loop_candidates_tested``, ``optimisation_ms``,
+    ``alignment_ms``, ``slam_error`` of a SLAM run."""
+    st = slam.backend.stats
+    return {
+        "slam": True,
+        "loop_closures": int(st.loop_closures),
+        "graph_edges": len(slam.backend.graph.edges),
+        "loop_candidates_tested": int(st.tested),
+        "optimisation_ms": float(st.optimisation_ms),
+        "alignment_ms": float(st.alignment_ms),
+        "slam_error": None if slam.error is None else f"{type(slam.error).__name__}: {slam.error}",
+    }

@@ -22,12 +22,10 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from dmtrack.geometry.lie import SE3, Sim3
+from dmtrack.geometry.lie import Sim3
 from dmtrack.io.atomic import write_text
 from dmtrack.io.ply import write_ply
-from dmtrack.io.trajectory import Trajectory, write_tum
+from dmtrack.io.trajectory import write_tum
 
 
 def _matrix(S: Sim3 | None) -> list[list[float]] | None:
@@ -64,13 +62,10 @@ def write_slam_outputs(out: Path, result: Any) -> None:
         return
     backend = slam.backend
     write_tum(out / "trajectory.txt", result.trajectory)
-    poses = backend.keyframe_poses()
-    ids = sorted(poses)
-    kf_traj = Trajectory(
-        np.array([backend.keyframes[k].timestamp for k in ids], dtype=np.float64),
-        np.array([SE3(poses[k].rotation, poses[k].translation).matrix() for k in ids]).reshape(-1, 4, 4),
-    )
-    write_tum(out / "keyframes.txt", kf_traj)
+    write_tum(out / "keyframes.txt", result.keyframes)
     if (out / "pointcloud_vo.ply").exists():
         write_ply(out / "pointcloud.ply", *backend.point_cloud())
-    write_text(out / "graph.json", json.dumps(graph_dict(backend), indent=1) + "\n")
+    g = graph_dict(backend)
+    # one keyframe or edge per line: readable, and diffable between runs
+    parts = [f'"{k}": [\n' + ",\n".join(json.dumps(item) for item in g[k]) + "\n]" for k in ("keyframes", "edges")]
+    write_text(out / "graph.json", "{" + ",\n".join(parts) + "}\n")

@@ -280,9 +280,10 @@ class SequenceRun:
                 np.array([k.T_wc for k in vo_result.keyframes], dtype=np.float64).reshape(-1, 4, 4),
             )
             trajectory = vo_trajectory = Trajectory(vo_result.timestamps, vo_result.poses)
-            if slam is not None and slam.error is None:
+            if slam is not None and slam.error is None:  # the optimised trajectory and keyframes
                 _, ts, poses = slam.backend.trajectory()
                 trajectory = Trajectory(ts, poses)
+                kfs = slam.backend.keyframe_trajectory()
             result = RunResult(
                 trajectory=trajectory,
                 keyframes=kfs,

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from dmtrack.geometry.lie import SE3, SO3, Sim3
+from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.frame import build_frame
 from dmtrack.odometry.sink import KeyframeSnapshot
@@ -46,7 +47,8 @@ class SlamConfig:
     keyframe (LSD-SLAM: graph distance ≥ 4); ``max_candidates`` the candidates tested per keyframe (LSD-SLAM's
     ``maxLoopClosureCandidates`` is 10); ``convergence_eps`` the Sim(3) alignment's stopping ratio (the odometry's
     tracker: 0.999); ``optimise_every``: after a new loop edge the graph is optimised once at least this many
-    keyframes have entered it since the last optimisation (and always at the end).
+    keyframes have entered it since the last optimisation (and always at the end); ``view_cache_mb``: the memory
+    for keyframes' feature pyramids kept between alignments (others are computed again when needed).
     """
 
     strictness: float = 1.5
@@ -55,21 +57,31 @@ class SlamConfig:
     optimise_iterations: int = 100
     convergence_eps: float = 0.99
     optimise_every: int = 3
+    view_cache_mb: float = 1024.0
 
 
 @dataclass
 class SlamKeyframe:
-    """A keyframe in the graph: its odometry pose (Sim3, keyframe units → world) and what alignment needs."""
+    """A keyframe in the graph: its odometry pose (Sim3, keyframe units → world), its image and final inverse
+    depth; :attr:`view` (its feature pyramid and tracking reference) is built on demand and cached by the back end
+    within a memory budget (dense SIFT's pyramid is about 60 MB a keyframe)."""
 
     kf_id: int
     frame_index: int
     timestamp: float
     vo_pose: Sim3
-    view: KeyframeView
-    image: np.ndarray | None
+    image: np.ndarray
+    idepth: np.ndarray
+    idepth_var: np.ndarray
+    camera: Any
     mean_idepth: float
     points: np.ndarray | None = None  # (M, 3) semi-dense points in keyframe units, for the optimised point cloud
     colours: np.ndarray | None = None  # (M, 3) uint8
+    load_view: Any = field(default=None, repr=False)  # () → KeyframeView
+
+    @property
+    def view(self) -> KeyframeView:
+        return self.load_view(self)
 
 
 @dataclass
@@ -93,6 +105,13 @@ class SlamStats:
     alignment_ms: float = 0.0
     optimisations: int = 0
     edges: list[GraphEdge] = field(default_factory=list)
+
+
+def _nbytes(view: KeyframeView) -> int:
+    total = 0
+    for level in view.frame.levels[1:]:
+        total += level.feat.nbytes + (2 * level.feat.nbytes if level._gx is not None else 0)
+    return total
 
 
 def sim3_of(snapshot: KeyframeSnapshot) -> Sim3:
@@ -127,6 +146,7 @@ class SlamBackend:
         self.keyframe_of: dict[int, int] = {}
         self.stats = SlamStats()
         self._last_odometry_info: np.ndarray | None = None
+        self._views: dict[int, KeyframeView] = {}  # kf_id → view, least recently used first
         self._pending_loops = 0  # loop edges added since the last optimisation
         self._last_optimised = 0  # the newest keyframe at the last optimisation
 
@@ -161,20 +181,40 @@ class SlamBackend:
     # -- keyframes and edges -----------------------------------------------------------------------------------------
 
     def _keyframe(self, snap: KeyframeSnapshot) -> SlamKeyframe:
-        cfg = self.config
-        image = snap.image
-        recompute = getattr(self.feature, "pyramid", "downsample") == "recompute"
-        fmap = self.feature.compute_pyramid(image, cfg.pyramid_levels) if recompute else self.feature.compute(image)
-        frame = build_frame(snap.frame_index, snap.timestamp, image, fmap, snap.camera, cfg.pyramid_levels)
-        ref = TrackingReference.from_keyframe(frame, snap.idepth, snap.idepth_var, levels=())
+        if snap.image is None:
+            raise ValueError(f"keyframe {snap.keyframe_id} has no image: the back end aligns the keyframes' features")
         valid = snap.idepth_var > 0
         mean_idepth = float(snap.idepth[valid].mean()) if valid.any() else 1.0
         pose = sim3_of(snap)
         pts, col = snap.points_world(self.max_point_var)
         inv = pose.inverse()
         local = np.einsum("nk,jk->nj", pts, inv.scale * np.asarray(inv.rotation.matrix())) + inv.translation
-        return SlamKeyframe(snap.keyframe_id, snap.frame_index, snap.timestamp, pose, KeyframeView(frame, ref),
-                            image, mean_idepth, local, np.array(col))
+        return SlamKeyframe(snap.keyframe_id, snap.frame_index, snap.timestamp, pose, snap.image, snap.idepth,
+                            snap.idepth_var, snap.camera, mean_idepth, local, np.array(col), self._view)
+
+    def _view(self, kf: SlamKeyframe) -> KeyframeView:
+        """The keyframe's pyramid and tracking reference, from the cache or built (the oldest views leave the
+        cache once it holds more than ``SlamConfig.view_cache_mb``)."""
+        view = self._views.pop(kf.kf_id, None)
+        if view is None:
+            view = self._build_view(kf)
+        self._views[kf.kf_id] = view  # the newest last
+        budget = self.slam.view_cache_mb * 2**20
+        while len(self._views) > 2 and sum(_nbytes(v) for v in self._views.values()) > budget:
+            self._views.pop(next(iter(self._views)))
+        return view
+
+    def _build_view(self, kf: SlamKeyframe) -> KeyframeView:
+        cfg = self.config
+        recompute = getattr(self.feature, "pyramid", "downsample") == "recompute"
+        image = kf.image
+        fmap = self.feature.compute_pyramid(image, cfg.pyramid_levels) if recompute else self.feature.compute(image)
+        frame = build_frame(kf.frame_index, kf.timestamp, image, fmap, kf.camera, cfg.pyramid_levels)
+        ref = TrackingReference.from_keyframe(frame, kf.idepth, kf.idepth_var, levels=())
+        # the alignment never reads level 0: a zero-byte stand-in of its shape keeps the pyramid's geometry
+        level0 = frame.levels[0]
+        level0.feat = np.broadcast_to(np.float32(0), level0.feat.shape)
+        return KeyframeView(frame, ref)
 
     def _graph_pose_of_new(self, kf: SlamKeyframe) -> Sim3:
         """The new keyframe's pose in the graph: the odometry's relative pose to its parent, composed with the
@@ -250,6 +290,15 @@ class SlamBackend:
     def keyframe_poses(self) -> dict[int, Sim3]:
         """Optimised Sim3 pose (keyframe units → world) of every keyframe in the graph."""
         return dict(self.graph.poses)
+
+    def keyframe_trajectory(self) -> Trajectory:
+        """The keyframes' optimised poses as SE(3) camera-to-world (the scale dropped), in keyframe order."""
+        poses = self.graph.poses
+        ids = sorted(poses)
+        return Trajectory(
+            np.array([self.keyframes[k].timestamp for k in ids], dtype=np.float64),
+            np.array([SE3(poses[k].rotation, poses[k].translation).matrix() for k in ids]).reshape(-1, 4, 4),
+        )
 
     def point_cloud(self) -> tuple[np.ndarray, np.ndarray]:
         """The keyframes' semi-dense points placed by their optimised poses, and their colours."""

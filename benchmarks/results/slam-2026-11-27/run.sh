@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The measurements of issue 31 (SLAM), as run for docs/slam.md and README.md. From the repository root:
+#   bash benchmarks/results/slam-2026-11-27/run.sh
+# Each accuracy run is one `dmtrack run --slam` (one numba thread); runs/NAME_seedK/ keeps its metrics.json,
+# graph.json and trajectories (the point clouds are not kept).
+set -euo pipefail
+S=${DMTRACK_SHARED:-../shared}/data/7scenes-0000-0699
+R=benchmarks/results/slam-2026-11-27
+PY=${PYTHON:-.venv/bin/python}
+"$PY" benchmarks/slam_study.py "$S" --feature gray --init geometric --seeds 0 --jobs 1 --out "$R" --name 7scenes_gray_geometric
+"$PY" benchmarks/slam_study.py "$S" --feature gray --init random --seeds 0-4 --out "$R" --name 7scenes_gray_random
+"$PY" benchmarks/slam_study.py "$S" --feature bitplanes --init geometric --seeds 0 --jobs 1 --out "$R" --name 7scenes_bitplanes_geometric
+"$PY" benchmarks/slam_study.py "$S" --feature dsift --init geometric --seeds 0 --jobs 1 --out "$R" --name 7scenes_dsift_geometric
+# whole-run speed, VO and SLAM alternated three times (nothing else running)
+"$PY" benchmarks/slam_study.py "$S" --feature gray --speed 3 --out "$R" --name 7scenes_gray
+# every accepted edge of the default run against the ground truth
+"$PY" benchmarks/slam_edges.py "$R/runs/7scenes_gray_geometric_seed0" --json "$R/7scenes_gray_geometric_edges.json" \
+  > "$R/7scenes_gray_geometric_edges.txt"

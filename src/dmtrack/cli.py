@@ -346,18 +346,25 @@ def cmd_fit_pca(args: argparse.Namespace) -> int:
 
     from dmtrack.features import get_feature
     from dmtrack.features.base import user_pca_path
-    from dmtrack.features.pca import fit_pca
+    from dmtrack.features.pca import calibrate_reduced, fit_pca
 
     feature = get_feature(args.feature, **_feature_options(args.feature_opt))
     images = _sample_images(args.sequences, args.frames, args.format, None)
     basis = fit_pca(feature, images, k=args.k, n_samples=args.samples, seed=args.seed)
-    out = Path(args.out) if args.out else user_pca_path(feature.name, args.k)
+    # the reduced feature's own default scale and channel counts, stored with the basis
+    basis = calibrate_reduced(feature, basis, args.k, images)
+    default = user_pca_path(feature.name, args.k)
+    out = Path(args.out) if args.out else default
     out.parent.mkdir(parents=True, exist_ok=True)
-    basis.save(out)
+    out = basis.save(out)
     ratio = getattr(basis, "explained_variance_ratio", None)
     kept = f", {100 * float(sum(ratio)):.1f}% of the variance" if ratio is not None else ""
+    cal = basis.calibration
     print(f"PCA basis of {feature.name}: {args.k} of {feature.channels} components{kept} -> {out}")
-    print(f"use it with --feature {feature.name}-pca{args.k}")
+    print(f"calibrated {feature.name}-pca{args.k} on the same {len(images)} images: scale {cal.scale:.4g}, "
+          f"N_E {cal.energy_channels:.3g}, kappa {cal.info_channels:.3g}, N_sigma {cal.noise_energy_channels:.3g}")
+    where = "" if out.resolve() == default.resolve() else f" --feature-opt pca={out}"
+    print(f"use it with --feature {feature.name}-pca{args.k}{where}")
     return 0
 
 

@@ -164,3 +164,42 @@ def test_get_feature_pca_name(tmp_path: Path) -> None:
             get_feature("test-lowrank-pca2", pca=tmp_path / "nope.npz")
     finally:
         unregister("test-lowrank")
+
+
+def test_dsift_projects_where_the_descriptor_is_formed() -> None:
+    # dsift-pcaK never writes the 128-channel map; the result equals projecting it, within float32 rounding
+    dsift = get_feature("dsift")
+    rng = np.random.default_rng(2)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (48, 64), dtype=np.uint8), (5, 5), 1.2)
+    basis = fit_pca(dsift, [img], k=8, n_samples=2000, seed=1)
+    weight, bias = basis.projection(input_scale=dsift.scale)
+    fm = dsift.compute(img).astype(np.float64)
+    expected = fm @ weight.astype(np.float64).T + bias
+    got = dsift.compute_projected(img, weight, bias)
+    assert got.shape == (48, 64, 8) and got.dtype == np.float32
+    np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-3 * np.abs(expected).max())
+    reduced = ReducedFeature(dsift, basis, scale=1.0)
+    np.testing.assert_array_equal(reduced.compute(img), got)  # the reduced feature takes this path
+    with pytest.raises(InputError, match="projection must be"):
+        dsift.compute_projected(img, weight[:, :5], bias)
+
+
+def test_fit_pca_calibrates_the_reduced_feature(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # dmtrack fit-pca stores the reduced feature's own scale and channel counts with the basis; the reduced
+    # feature uses them, and the hint names the file when it is not in the config folder
+    from dmtrack.cli import main
+
+    out = tmp_path / "dsift-pca4.npz"
+    assert main(["fit-pca", "--feature", "dsift", "--k", "4", "synthetic:n_frames=3,width=128,height=96",
+                 "--frames", "3", "--samples", "3000", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"--feature dsift-pca4 --feature-opt pca={out}" in printed
+    basis = PcaBasis.load(out)
+    cal = basis.calibration
+    assert cal is not None and cal.k == 4 and cal.scale > 0 and cal.energy_channels > 0 and cal.info_channels > 0
+    reduced = get_feature("dsift-pca4", pca=out)
+    assert reduced.scale == cal.scale and reduced.energy_channels == pytest.approx(cal.energy_channels)
+    twice = get_feature("dsift-pca4", pca=out, scale=2 * cal.scale)  # the counts follow the scale, as for others
+    assert twice.energy_channels == pytest.approx(4 * cal.energy_channels)
+    assert twice.info_channels == pytest.approx(cal.info_channels / 4)
+    assert get_feature("dsift-pca3", pca=out).scale != cal.scale  # measured for K = 4 only

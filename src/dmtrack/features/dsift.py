@@ -44,6 +44,7 @@ from typing import Literal
 import numba
 import numpy as np
 
+from dmtrack.errors import InputError
 from dmtrack.features import _nn
 from dmtrack.features.base import Feature, prepare_image
 
@@ -287,6 +288,59 @@ def _assemble_rows(cpad, energy, shifts, margin, eps, gain, r0, r1, out):  # pra
 
 
 @numba.njit(cache=True, nogil=True)
+def _band_major_rows(cpad, r0, r1, out):  # pragma: no cover - compiled
+    """Rows r0..r1-1 of the padded cell sums, band-major: ``out[k, y, x] = cpad[y, x, k]``."""
+    for y in range(r0, r1):
+        row = cpad[y]
+        for k in range(row.shape[1]):
+            o = out[k, y]
+            for x in range(row.shape[0]):
+                o[x] = row[x, k]
+
+
+@numba.njit(cache=True, nogil=True)
+def _assemble_project_rows(cband, energy, shifts, margin, eps, gain, weight, bias, r0, r1, out):  # pragma: no cover
+    """Rows r0..r1-1 of the descriptors (no clamp) projected at once, never formed: ``out = weight d + bias`` per
+    pixel (``weight``: (K, 128)), with ``d = fac · h`` as :func:`_assemble_rows` has it, computed as
+    ``fac · (weight h) + bias`` — the 128 products summed in float32 over contiguous runs of a row of the band-major
+    cell sums ``cband`` (8, H + 2M, W + 2M), so they vectorise."""
+    w = out.shape[1]
+    kk = weight.shape[0]
+    fac = np.empty(w, np.float64)
+    acc = np.empty((kk, w), np.float32)
+    for y in range(r0, r1):
+        for x in range(w):
+            fac[x] = 0.0
+        for i in range(4):
+            erow = energy[y + margin + shifts[i]]
+            for j in range(4):
+                off = margin + shifts[j]
+                for x in range(w):
+                    fac[x] += erow[x + off]
+        for x in range(w):
+            ss = fac[x]
+            fac[x] = gain / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+        acc[:, :] = 0.0
+        for i in range(4):
+            yy = y + margin + shifts[i]
+            for j in range(4):
+                off = margin + shifts[j]
+                b = (i * 4 + j) * 8
+                for k in range(8):
+                    src = cband[k, yy, off : off + w]
+                    for q in range(kk):
+                        wq = weight[q, b + k]
+                        arow = acc[q]
+                        for x in range(w):
+                            arow[x] += wq * src[x]
+        orow = out[y]
+        for x in range(w):
+            f = fac[x]
+            for q in range(kk):
+                orow[x, q] = np.float32(bias[q] + f * acc[q, x])
+
+
+@numba.njit(cache=True, nogil=True)
 def _assemble_clamp_rows(cpad, shifts, margin, clamp, eps, gain, r0, r1, out):  # pragma: no cover - compiled
     """Rows r0..r1-1 with Lowe's clamp: ``d = min(h / (‖h‖ + eps), clamp)``, ``d = gain · d / ‖d‖``."""
     w, dim = out.shape[1], out.shape[2]
@@ -435,6 +489,41 @@ class DenseSiftFeature(Feature):
                 ROW_BLOCK,
                 threads,
             )
+        return out
+
+    def compute_projected(self, image: np.ndarray, weight: np.ndarray, bias: np.ndarray,
+                          threads: int | None = None) -> np.ndarray:
+        """``compute(image) @ weight.T + bias`` per pixel, projected where each descriptor is formed (row blocks in
+        parallel), so the 128-channel map is never written: ``(H, W, K)`` float32.
+
+        Used by :class:`~dmtrack.features.pca.ReducedFeature` for ``dsift-pcaK``; equal to projecting
+        :meth:`compute`'s output within float32 rounding. With ``clamp`` it projects the full
+        map (the clamp needs each descriptor's second norm).
+        """
+        weight = np.asarray(weight, np.float32)
+        bias = np.ascontiguousarray(bias, np.float32)
+        if weight.ndim != 2 or weight.shape[1] != self.channels or bias.shape != (weight.shape[0],):
+            raise InputError(f"projection must be (K, {self.channels}) and (K,), got {weight.shape}, {bias.shape}")
+        if self.clamp is not None:
+            fm = self.compute(image)
+            h, w, n = fm.shape
+            return (fm.reshape(h * w, n) @ weight.T + bias).reshape(h, w, weight.shape[0])
+        img = prepare_image(image, colour=False)
+        cpad, energy = self._cell_sums(img, threads)
+        h, w = img.shape[:2]
+        out = np.empty((h, w, weight.shape[0]), np.float32)
+        g = 255.0 * float(self.scale)
+        m = self._margin
+        weight = np.ascontiguousarray(weight)
+        hp, wp, nb = cpad.shape
+        cband = _nn.scratch("dsift.cband", (nb, hp, wp), np.float32)
+        _nn.parallel_for(lambda a, b: _band_major_rows(cpad, a, b, cband), hp, ROW_BLOCK, threads)
+        _nn.parallel_for(
+            lambda a, b: _assemble_project_rows(cband, energy, self._shifts, m, self.eps, g, weight, bias, a, b, out),
+            h,
+            ROW_BLOCK,
+            threads,
+        )
         return out
 
     def __repr__(self) -> str:

@@ -32,6 +32,18 @@ from dmtrack.io.atomic import atomic_open
 _FORMAT_VERSION = 1
 
 
+@dataclass(frozen=True)
+class ReducedCalibration:
+    """A reduced feature's default scale (paper §2.4, as ``dmtrack calibrate-scale``) and its channel counts N_E, κ,
+    N_σ at that scale (:func:`dmtrack.features.scale.measure_channel_statistics`), for K components."""
+
+    k: int
+    scale: float
+    energy_channels: float
+    info_channels: float
+    noise_energy_channels: float
+
+
 @dataclass(frozen=True, eq=False)
 class PcaBasis:
     """Principal axes of a feature.
@@ -54,6 +66,9 @@ class PcaBasis:
         Number of sampled feature vectors.
     seed : int
         Sampling seed.
+    calibration : ReducedCalibration, optional
+        The reduced feature's own default scale and channel counts, measured by ``dmtrack fit-pca`` for
+        ``calibration.k`` components (:func:`calibrate_reduced`); used by :class:`ReducedFeature` with that K.
     """
 
     mean: np.ndarray
@@ -64,6 +79,7 @@ class PcaBasis:
     feature_scale: float = 1.0
     n_samples: int = 0
     seed: int = 0
+    calibration: ReducedCalibration | None = None
 
     def __post_init__(self) -> None:
         mean = np.asarray(self.mean, dtype=np.float64)
@@ -100,7 +116,7 @@ class PcaBasis:
             raise InputError(f"PCA basis of {self.feature or 'feature'!r} has {self.k} components, cannot take {k}")
         return PcaBasis(
             self.mean, self.components[:k], self.explained_variance[:k], self.total_variance, self.feature,
-            self.feature_scale, self.n_samples, self.seed,
+            self.feature_scale, self.n_samples, self.seed, self.calibration,
         )
 
     def projection(self, k: int | None = None, input_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -152,6 +168,10 @@ class PcaBasis:
                 feature_scale=np.float64(self.feature_scale),
                 n_samples=np.int64(self.n_samples),
                 seed=np.int64(self.seed),
+                **({} if self.calibration is None else {
+                    "calibration": np.array([self.calibration.k, self.calibration.scale,
+                                             self.calibration.energy_channels, self.calibration.info_channels,
+                                             self.calibration.noise_energy_channels], dtype=np.float64)}),
             )
         return path
 
@@ -179,6 +199,7 @@ class PcaBasis:
                     feature_scale=float(z["feature_scale"]) if "feature_scale" in keys else 1.0,
                     n_samples=int(z["n_samples"]) if "n_samples" in keys else 0,
                     seed=int(z["seed"]) if "seed" in keys else 0,
+                    calibration=_calibration(z["calibration"]) if "calibration" in keys else None,
                 )
         except InputError as exc:
             if exc.path is None:
@@ -186,6 +207,31 @@ class PcaBasis:
             raise
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f"cannot read PCA basis: {exc}", path=path) from None
+
+
+def _calibration(values: np.ndarray) -> ReducedCalibration:
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.shape != (5,) or not np.all(np.isfinite(v)) or v[0] < 1 or v[1] <= 0:
+        raise InputError(f"invalid calibration entry {v.tolist()}")
+    return ReducedCalibration(int(v[0]), float(v[1]), float(v[2]), float(v[3]), float(v[4]))
+
+
+def calibrate_reduced(
+    base: Feature, basis: PcaBasis, k: int, images: Iterable[np.ndarray | str | Path]
+) -> PcaBasis:
+    """``basis`` with the calibration of ``BASE-pcaK`` on ``images``: the default scale that gives grey's number of
+    semi-dense pixels, then N_E, κ, N_σ at that scale (what ``dmtrack calibrate-scale`` and
+    ``python -m dmtrack.features.scale`` measure for a packaged feature)."""
+    from dmtrack.features.scale import calibrate_scale, measure_channel_statistics
+
+    imgs = list(iter_images(images))
+    scale = calibrate_scale(ReducedFeature(base, basis, k=k, scale=1.0), imgs)
+    stats = measure_channel_statistics(ReducedFeature(base, basis, k=k, scale=scale), imgs)
+    n_sigma = k * stats.noise_var / stats.grey_noise_var if stats.grey_noise_var > 0 else float(k)
+    cal = ReducedCalibration(int(k), float(scale), float(stats.energy_channels), float(stats.info_channels),
+                             float(n_sigma))
+    return PcaBasis(basis.mean, basis.components, basis.explained_variance, basis.total_variance, basis.feature,
+                    basis.feature_scale, basis.n_samples, basis.seed, cal)
 
 
 def _sample_pixels(shape: tuple[int, int], n: int, border: int, rng: np.random.Generator) -> np.ndarray:
@@ -301,9 +347,11 @@ class ReducedFeature(Feature):
         if not 1 <= k <= basis.k:
             raise InputError(f"PCA basis for {base.name!r} has {basis.k} components, cannot reduce to {k}")
         name = f"{base.name}-pca{k}"
+        cal = basis.calibration if basis.calibration is not None and basis.calibration.k == k else None
         if scale is None:
-            scale = default_scale(name)
+            scale = cal.scale if cal is not None else default_scale(name)
         super().__init__(1.0 if scale is None else scale)
+        self._calibration = cal
         self.base = base
         self.basis = basis.truncated(k)
         self.name = name
@@ -327,6 +375,13 @@ class ReducedFeature(Feature):
         out = fm.reshape(h * w, n) @ weight.T
         out += bias
         return out.reshape(h, w, weight.shape[0])
+
+    def _channel_stat(self, key: str, power: int) -> float | None:
+        # measured by fit-pca for this K (stored with the basis), else the tables' entry for the name, if any
+        cal = self._calibration
+        if cal is None or int(self.channels) == 1:
+            return super()._channel_stat(key, power)
+        return float(getattr(cal, key)) * (float(self.scale) / cal.scale) ** power
 
     def __repr__(self) -> str:
         return f"ReducedFeature(base={self.base!r}, k={self.channels}, scale={self.scale:g})"

@@ -92,11 +92,6 @@ class SequenceRun:
             raise InputError("track_many: every configuration must use the same pyramid_levels")
         self.camera: PinholeCamera
         self.camera, self.box = seq.camera.crop_to_multiple(16)
-        self.slams = [_slam_backend(feat, c, slam) for c in configs] if slam else [None] * len(configs)
-        sinks = [s if b is None else (b if s is None else MultiSink(s, b)) for s, b in zip(sinks, self.slams,
-                                                                                           strict=True)]
-        self.vos = [VisualOdometry(self.camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
-        self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self.init_depth = any(c.init == "groundtruth" for c in configs)
         if self.init_depth:
             if not getattr(seq, "has_depth", False):
@@ -105,6 +100,12 @@ class SequenceRun:
                 raise InputError(
                     f"init='groundtruth': the depth images of {seq.name!r} are not registered to the colour camera"
                 )
+        # every check above comes before the back ends' threads start
+        self.slams = [_slam_backend(feat, c, slam) for c in configs] if slam else [None] * len(configs)
+        sinks = [s if b is None else (b if s is None else MultiSink(s, b)) for s, b in zip(sinks, self.slams,
+                                                                                           strict=True)]
+        self.vos = [VisualOdometry(self.camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
+        self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self._first = True  # the first frame prepared is the first the odometry gets (its depth initialises it)
         self._read_frame = getattr(seq, "read_frame", None)
         self.kept: dict[int, Any] = {}  # frames read for the geometric start, given to the odometry next

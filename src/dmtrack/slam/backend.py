@@ -188,7 +188,9 @@ class SlamBackend:
         pose = sim3_of(snap)
         pts, col = snap.points_world(self.max_point_var)
         inv = pose.inverse()
-        local = np.einsum("nk,jk->nj", pts, inv.scale * np.asarray(inv.rotation.matrix())) + inv.translation
+        # float32 in keyframe units: a 640×480 keyframe has ~10⁵ points, kept until the end
+        local = (np.einsum("nk,jk->nj", pts, inv.scale * np.asarray(inv.rotation.matrix())) + inv.translation)
+        local = local.astype(np.float32)
         return SlamKeyframe(snap.keyframe_id, snap.frame_index, snap.timestamp, pose, snap.image, snap.idepth,
                             snap.idepth_var, snap.camera, mean_idepth, local, np.array(col), self._view)
 
@@ -308,7 +310,8 @@ class SlamBackend:
             P = self.graph.poses.get(k, kf.vo_pose)
             if kf.points is None or kf.colours is None:
                 continue
-            pts.append(np.einsum("nk,jk->nj", kf.points, P.scale * np.asarray(P.rotation.matrix())) + P.translation)
+            local = kf.points.astype(np.float64)
+            pts.append(np.einsum("nk,jk->nj", local, P.scale * np.asarray(P.rotation.matrix())) + P.translation)
             cols.append(kf.colours)
         return np.concatenate(pts), np.concatenate(cols)
 

@@ -2,7 +2,7 @@
 and the whole-run speed, interleaved.
 
     python benchmarks/slam_study.py SEQUENCE --feature gray [--init random --seeds 0-4] --out DIR --name NAME
-    python benchmarks/slam_study.py SEQUENCE --speed 3 --out DIR --name NAME
+    python benchmarks/slam_study.py SEQUENCE --speed 3 --out DIR --name NAME [more dmtrack run arguments]
 
 Accuracy: one ``dmtrack run --slam`` per seed (one process each, one numba thread, ``--jobs`` at once); each run's
 metrics.json has the SLAM trajectory's figures and the odometry's (``vo_*``, the same run's ``trajectory_vo.txt``),
@@ -123,8 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=int, default=0, metavar="N", help="interleaved speed runs instead of accuracy")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--name", required=True)
-    ap.add_argument("extra", nargs="*", help="more dmtrack run arguments (after --)")
-    a = ap.parse_args(argv)
+    a, a.extra = ap.parse_known_args(argv)  # anything else is passed to dmtrack run (e.g. --max-frames 150)
     a.out.mkdir(parents=True, exist_ok=True)
     speed(a) if a.speed else accuracy(a)
     return 0

@@ -13,6 +13,8 @@ PY=${PYTHON:-.venv/bin/python}
 "$PY" benchmarks/slam_study.py "$S" --feature dsift --init geometric --seeds 0 --jobs 1 --out "$R" --name 7scenes_dsift_geometric
 # whole-run speed, VO and SLAM alternated three times (nothing else running)
 "$PY" benchmarks/slam_study.py "$S" --feature gray --speed 3 --out "$R" --name 7scenes_gray
+"$PY" benchmarks/slam_study.py data/7scenes-redkitchen-0000-0299 --feature dsift --speed 2 --out "$R" --name sample_dsift \
+  --max-frames 150
 # every accepted edge of the default run against the ground truth
 "$PY" benchmarks/slam_edges.py "$R/runs/7scenes_gray_geometric_seed0" --json "$R/7scenes_gray_geometric_edges.json" \
   > "$R/7scenes_gray_geometric_edges.txt"

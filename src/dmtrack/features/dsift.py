@@ -256,6 +256,24 @@ def _vfilter_rows(src, offs, wts, r0, r1, dst, energy):  # pragma: no cover - co
 
 
 @numba.njit(cache=True, nogil=True)
+def _norm_factors(energy, shifts, margin, eps, gain, y, fac):  # pragma: no cover - compiled
+    """Row y's normalisation factors ``gain / (‖h‖ + eps)`` (0 where ‖h‖ = 0), ‖h‖² the sum of the 16 cells'
+    band energies at each pixel, into ``fac`` (W,) float64."""
+    w = fac.shape[0]
+    for x in range(w):
+        fac[x] = 0.0
+    for i in range(4):
+        erow = energy[y + margin + shifts[i]]
+        for j in range(4):
+            off = margin + shifts[j]
+            for x in range(w):
+                fac[x] += erow[x + off]
+    for x in range(w):
+        ss = fac[x]
+        fac[x] = gain / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
 def _assemble_rows(cpad, energy, shifts, margin, eps, gain, r0, r1, out):  # pragma: no cover - compiled
     """Rows r0..r1-1 of the descriptors (no clamp), 4×4 cells × 8 bins: the cells are shifted reads of the
     filtered bands, ``d = gain · h / (‖h‖ + eps)`` with ‖h‖² summed from the per-position band energies
@@ -263,17 +281,7 @@ def _assemble_rows(cpad, energy, shifts, margin, eps, gain, r0, r1, out):  # pra
     w = out.shape[1]
     fac = np.empty(w, np.float64)
     for y in range(r0, r1):
-        for x in range(w):
-            fac[x] = 0.0
-        for i in range(4):
-            erow = energy[y + margin + shifts[i]]
-            for j in range(4):
-                off = margin + shifts[j]
-                for x in range(w):
-                    fac[x] += erow[x + off]
-        for x in range(w):
-            ss = fac[x]
-            fac[x] = gain / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+        _norm_factors(energy, shifts, margin, eps, gain, y, fac)
         orow = out[y]
         for i in range(4):
             crow = cpad[y + margin + shifts[i]]
@@ -309,17 +317,7 @@ def _assemble_project_rows(cband, energy, shifts, margin, eps, gain, weight, bia
     fac = np.empty(w, np.float64)
     acc = np.empty((kk, w), np.float32)
     for y in range(r0, r1):
-        for x in range(w):
-            fac[x] = 0.0
-        for i in range(4):
-            erow = energy[y + margin + shifts[i]]
-            for j in range(4):
-                off = margin + shifts[j]
-                for x in range(w):
-                    fac[x] += erow[x + off]
-        for x in range(w):
-            ss = fac[x]
-            fac[x] = gain / (math.sqrt(ss) + eps) if ss > 0.0 else 0.0
+        _norm_factors(energy, shifts, margin, eps, gain, y, fac)
         acc[:, :] = 0.0
         for i in range(4):
             yy = y + margin + shifts[i]

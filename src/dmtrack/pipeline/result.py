@@ -88,16 +88,6 @@ def _interrupt_name(e: BaseException | None) -> str | None:
     return "SIGINT" if isinstance(e, KeyboardInterrupt) else None
 
 
-def _groundtruth_span(seq: Sequence, start: int, stop: int) -> Trajectory | None:
-    """The ground-truth poses timed within the frames ``start … stop − 1`` (± 1 µs), or ``None``."""
-    gt = seq.groundtruth
-    if gt is None or len(gt) == 0 or stop <= start:
-        return None
-    times = np.asarray(seq.timestamps[start:stop], dtype=np.float64)
-    keep = (gt.timestamps >= times.min() - 1e-6) & (gt.timestamps <= times.max() + 1e-6)
-    return gt[np.nonzero(keep)[0]] if keep.any() else None
-
-
 def metrics_dict(
     result: RunResult,
     seq: Sequence,

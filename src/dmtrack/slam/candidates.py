@@ -53,7 +53,6 @@ class CandidateSearch:
         self.n_orb, self.ratio, self.min_matches = int(n_orb), float(ratio), int(min_matches)
         self.max_appearance = int(max_appearance)
         self._orb: dict[int, Any] = {}  # kf_id → (keypoint pixels (n, 2), descriptors) or None
-        self.matches: dict[tuple[int, int], int] = {}  # (new, old) → ratio-test matches, for graph.json
 
     def candidates(self, kf: Any, older: list[Any], poses: dict[int, Sim3]) -> list[Any]:
         """Candidates for ``kf`` among ``older`` (keyframes with ``kf_id``, ``image``, ``mean_idepth``, ``view``),
@@ -113,7 +112,6 @@ class CandidateSearch:
         scored = []
         for c in older:
             good = len(self._match(kf, c))
-            self.matches[(kf.kf_id, c.kf_id)] = good
             if good >= self.min_matches:
                 scored.append((good, c))
         scored.sort(key=lambda x: (-x[0], x[1].kf_id))

@@ -48,7 +48,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--exact-pixels", type=int, default=3000, help="pixels timed for the exact modes")
     parser.add_argument("--no-numpy", action="store_true", help="skip the (slower) numpy backend")
     parser.add_argument("--pca", default="64,32,16,8,4,2,1", help="K of the alexnet-pcaK variants to time")
+    parser.add_argument("--device", default="cpu",
+                        help="cpu (default: the CPU backends) or cuda / cuda:N: also every feature on that GPU")
     args = parser.parse_args(argv)
+    from dmtrack.features.device import resolve_device
+
+    gpu = resolve_device(args.device)  # one line naming what is missing, before anything runs
 
     from dmtrack.features import _nn
     from dmtrack.features.alexnet import AlexNetFeature
@@ -101,10 +106,10 @@ def main(argv: list[str] | None = None) -> int:
 
     # AlexNet has its own exact FFT backend (the default, "auto") besides torch and numpy
     for be in ["fft", *backends]:
-        alex = AlexNetFeature(weights=alex_w, backend=be)
+        alex = AlexNetFeature(weights=alex_w, backend=be, device="cpu")
         row("alexnet (stand-in w)", be, alex, PAPER["alexnet"])
     be = "fft"
-    alex = AlexNetFeature(weights=alex_w, backend=be)
+    alex = AlexNetFeature(weights=alex_w, backend=be, device="cpu")
     ks = sorted({int(k) for k in args.pca.split(",") if k.strip()}, reverse=True)
     if ks:
         frames = sorted(args.image.parent.glob("*.color.jpg"))[::60] or [args.image]
@@ -113,22 +118,55 @@ def main(argv: list[str] | None = None) -> int:
             paper = f"AlexNet-{k}D {PAPER_ALEXNET_PCA_MS[k]:g} ms" if k in PAPER_ALEXNET_PCA_MS else "-"
             row(f"alexnet-pca{k}", be, ReducedFeature(alex, basis, k=k), paper)
     for be in backends:
-        row("siamese local", be, SiameseFeature(weights=siam_w, backend=be), PAPER["siamese"])
+        row("siamese local", be, SiameseFeature(weights=siam_w, backend=be, device="cpu"), PAPER["siamese"])
     for be in backends[:1]:
-        params = SiameseFeature(weights=siam_w, backend=be).params
+        params = SiameseFeature(weights=siam_w, backend=be, device="cpu").params
         extrapolated("siamese patch (exact)", be, 256,
                      lambda pix, p=params, b=be: exact_siam(grey, p, pixels=pix, backend=b), PAPER["siamese"])
     for be in backends:
-        row("tfeat local", be, TFeatFeature(backend=be))
+        row("tfeat local", be, TFeatFeature(backend=be, device="cpu"))
     for be in backends[:1]:
-        params = TFeatFeature(backend=be).params
+        params = TFeatFeature(backend=be, device="cpu").params
         extrapolated("tfeat patch (exact)", be, 128,
                      lambda pix, p=params, b=be: exact_tfeat(grey, p, pixels=pix, backend=b))
     if _nn.have_torch():
         from dmtrack.features.disk import DiskFeature
 
-        row("disk", "torch", DiskFeature())
+        row("disk", "torch", DiskFeature(device="cpu"))
+    if gpu is not None:
+        gpu_rows(row, args, alex_w, siam_w, frames if ks else [args.image], ks, str(gpu))
     return 0
+
+
+def gpu_rows(row, args, alex_w: Path, siam_w: Path, frames: list, ks: list[int], device: str) -> None:  # noqa: ANN001
+    """The same features on the GPU: generation including the upload and the transfer into pinned memory."""
+    import torch
+
+    from dmtrack.features.alexnet import AlexNetFeature
+    from dmtrack.features.disk import DiskFeature
+    from dmtrack.features.pca import ReducedFeature, fit_pca
+    from dmtrack.features.siamese import SiameseFeature
+    from dmtrack.features.tfeat import TFeatFeature
+    from dmtrack.features.tracknet import TrackNetFeature
+
+    dev = torch.device(device)
+    label = device.replace("cuda", "gpu")
+    print(f"# on {device}: {torch.cuda.get_device_name(dev) if dev.type == 'cuda' else 'the device path'}", flush=True)
+    alex = AlexNetFeature(weights=alex_w, device=dev)
+    row("alexnet (stand-in w)", label, alex, PAPER["alexnet"])
+    if ks:
+        basis = fit_pca(alex, frames, n_samples=20_000, seed=0)
+        for k in ks:
+            paper = f"AlexNet-{k}D {PAPER_ALEXNET_PCA_MS[k]:g} ms" if k in PAPER_ALEXNET_PCA_MS else "-"
+            row(f"alexnet-pca{k}", label, ReducedFeature(alex, basis, k=k), paper)
+    row("siamese local", label, SiameseFeature(weights=siam_w, device=dev), PAPER["siamese"])
+    for name, feat in (("tfeat local", TFeatFeature(device=dev)), ("disk", DiskFeature(device=dev)),
+                       ("tracknet", TrackNetFeature(device=dev))):
+        row(name, label, feat)
+        if ks:
+            basis = fit_pca(feat, frames, n_samples=20_000, seed=0)
+            k16 = min(16, feat.channels)
+            row(f"{name.split()[0]}-pca{k16}", label, ReducedFeature(feat, basis, k=k16))
 
 
 if __name__ == "__main__":

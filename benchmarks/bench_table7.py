@@ -6,6 +6,7 @@ Usage::
                                       [--learned] [--warmup-frames 10] [--repeat 1] [--threads N]
                                       [--alexnet-weights auto|random|PATH] [--calib-frames 5]
                                       [--sequence DIR] [--out benchmarks/results/table7]
+                                      [--device cpu|cuda|cuda:N]
 
 What it measures
 ----------------
@@ -48,6 +49,14 @@ their scales are calibrated the same way (``--pca-scale 1``: the library's defau
 stored in the temporary ``$DMTRACK_HOME`` (``scales.json``, ``pca/alexnet.npz``), where
 :func:`dmtrack.features.get_feature` — and so ``staged_run`` — finds them.  If tracking is lost at frame i (this
 happens with random weights), the feature is timed on its first i frames and the row says so.
+
+On a GPU
+--------
+``--device cuda`` computes the network features (alexnet and alexnet-pcaK, tfeat, disk, tracknet, siamese) on the
+GPU (:mod:`dmtrack.features.device`): Generation then includes the upload of the image, the network, the PCA
+projection on the device and the transfer of the K-channel map into pinned host memory (each frame is synchronised
+before its timer stops).  The hand-crafted features (gray, bitplanes, dsift) run on the CPU either way; their rows
+say so.  ``--device cpu`` (the default) is the CPU kernels; the GPU's name is stored with the results.
 
 Results: ``OUT.json`` (every stage, per-frame means/medians, machine, settings) and ``OUT.md`` (the table).
 """
@@ -150,7 +159,8 @@ def machine_info() -> dict:
 
 
 def setup_alexnet(
-    names: list[str], sequence: Path, weights: str, calib_frames: int, tmp: Path, pca_scale: str = "calibrate"
+    names: list[str], sequence: Path, weights: str, calib_frames: int, tmp: Path, pca_scale: str = "calibrate",
+    device: str = "cpu",
 ) -> dict:
     """Make ``get_feature("alexnet")`` / ``("alexnet-pcaK")`` work without user files (see the module docs).
 
@@ -158,12 +168,15 @@ def setup_alexnet(
     temporary ``$DMTRACK_HOME``.  Returns a description stored with the results.
     """
     from dmtrack.errors import InputError
-    from dmtrack.features import get_feature
+    from dmtrack.features import get_feature as _get_feature
     from dmtrack.features.base import save_user_scale, user_pca_path
     from dmtrack.features.pca import fit_pca
     from dmtrack.features.scale import calibrate_scale_detailed
     from dmtrack.features.weights import find_weights
     from dmtrack.io.images import read_image
+
+    def get_feature(name: str):  # noqa: ANN202 - on the bench's device
+        return _get_feature(name, device=device)
 
     path: Path | None = None
     if weights == "auto":
@@ -228,7 +241,7 @@ def _lost_frame(exc: SystemExit) -> int | None:
     return int(m.group(1)) if m else None
 
 
-def run_feature(name: str, sequence: str, frames: int, warmup: int, repeat: int) -> dict:
+def run_feature(name: str, sequence: str, frames: int, warmup: int, repeat: int, device: str = "cpu") -> dict:
     """Warm-up + ``repeat`` staged runs of one feature; per-frame minimum over repeats, then frame statistics.
 
     If tracking is lost at frame i (runs are deterministic), the runs are repeated on the first i frames and
@@ -236,7 +249,7 @@ def run_feature(name: str, sequence: str, frames: int, warmup: int, repeat: int)
     """
     t0 = time.perf_counter()
     try:
-        staged_run(sequence, name, warmup)
+        staged_run(sequence, name, warmup, device)
     except SystemExit as exc:
         if _lost_frame(exc) is None:
             raise
@@ -246,14 +259,14 @@ def run_feature(name: str, sequence: str, frames: int, warmup: int, repeat: int)
     lost_at = None
     for _ in range(repeat):
         try:
-            t, _total, h, n_kf = staged_run(sequence, name, frames)
+            t, _total, h, n_kf = staged_run(sequence, name, frames, device)
         except SystemExit as exc:
             lost_at = _lost_frame(exc)
             if lost_at is None or lost_at < 2:
                 raise
             frames = lost_at
             print(f"{name}: tracking lost at frame {lost_at}; timing the first {lost_at} frames", flush=True)
-            t, _total, h, n_kf = staged_run(sequence, name, frames)
+            t, _total, h, n_kf = staged_run(sequence, name, frames, device)
         hashes.append(h)
         kfs.append(n_kf)
         per_frame = t if per_frame is None else {s: np.minimum(per_frame[s][:frames], t[s]) for s in STAGES}
@@ -285,6 +298,18 @@ def run_feature(name: str, sequence: str, frames: int, warmup: int, repeat: int)
     }
 
 
+def _device_lines(doc: dict) -> list[str]:
+    """Where the network features ran (``--device``), with the GPU's name."""
+    device = doc.get("device", "cpu")
+    if device == "cpu":
+        return []
+    gpu = doc.get("gpu") or {}
+    names = ", ".join(gpu.get("devices") or []) or "?"
+    return [f"Network features on **{device}** ({names}; PyTorch {gpu.get('torch')}, CUDA {gpu.get('cuda')}): "
+            "their Generation includes the image upload, the network, the PCA projection on the GPU and the "
+            "transfer into pinned host memory; gray, gray-affine, bitplanes and dsift run on the CPU.", ""]
+
+
 def markdown(doc: dict) -> str:
     """The table of ``doc`` (see :func:`main`) as Markdown."""
     m = doc["machine"]
@@ -303,6 +328,7 @@ def markdown(doc: dict) -> str:
         f"Load average before {doc['load_before']}, after {doc['load_after']}.  "
         "Paper: i7-4790K @ 4 GHz + GTX 1080, TUM DSO.",
         "",
+        *_device_lines(doc),
         "| Feature | Gen. ms | Paper gen. | Track. ms | Paper track. | Total ms | Paper total | fps | Paper fps "
         "| Faster than paper? | Mapping ms | Seq. total ms | KFs |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|---:|",
@@ -357,7 +383,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="scale of the alexnet-pcaK features: calibrated like the default scales, or 1")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "table7",
                     help="output prefix: OUT.json and OUT.md")
+    ap.add_argument("--device", default="cpu", help="where the network features run: cpu (default), cuda, cuda:N")
     args = ap.parse_args(argv)
+    from dmtrack.features.device import gpu_status, resolve_device
+
+    resolve_device(args.device)  # one line naming what is missing, before anything runs
 
     import numba
 
@@ -379,6 +409,8 @@ def main(argv: list[str] | None = None) -> int:
         "numba_threads": numba.get_num_threads(),
         "feature_threads": args.feature_threads,
         "features": names,
+        "device": args.device,
+        "gpu": gpu_status() if args.device != "cpu" else None,
         "load_before": load_before,
         "machine": machine_info(),
         "paper": {k: dict(zip(("label", "generation_ms", "tracking_ms", "total_ms", "fps"), v, strict=True))
@@ -388,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if any(n == "alexnet" or n.startswith("alexnet-pca") for n in names):
             doc["alexnet"] = setup_alexnet(
-                names, args.sequence, args.alexnet_weights, args.calib_frames, tmp, args.pca_scale
+                names, args.sequence, args.alexnet_weights, args.calib_frames, tmp, args.pca_scale, args.device
             )
             from dmtrack.features.alexnet import AUTO_BACKEND
 
@@ -401,7 +433,7 @@ def main(argv: list[str] | None = None) -> int:
         print(head, flush=True)
         for name in names:
             try:
-                r = run_feature(name, str(args.sequence), args.frames, args.warmup_frames, args.repeat)
+                r = run_feature(name, str(args.sequence), args.frames, args.warmup_frames, args.repeat, args.device)
             except (SystemExit, Exception) as exc:  # noqa: BLE001 - a lost track / missing dependency: report it
                 results[name] = {"error": f"{type(exc).__name__}: {exc}"[:200]}
                 print(f"{name:<15} failed: {results[name]['error']}", flush=True)

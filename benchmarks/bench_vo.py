@@ -65,8 +65,11 @@ def _hash_poses(poses: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(poses, dtype=np.float64).tobytes()).hexdigest()[:16]
 
 
-def staged_run(sequence: str, feature_name: str, frames: int) -> tuple[dict[str, np.ndarray], np.ndarray, str, int]:
-    """One sequential run with per-frame stage timers.
+def staged_run(
+    sequence: str, feature_name: str, frames: int, device: str | None = None
+) -> tuple[dict[str, np.ndarray], np.ndarray, str, int]:
+    """One sequential run with per-frame stage timers (``device``: where a network feature runs; None: its
+    default).
 
     Returns (stage → (n,) ms array, (n,) total ms per frame, trajectory hash, number of keyframes).
     """
@@ -77,7 +80,7 @@ def staged_run(sequence: str, feature_name: str, frames: int) -> tuple[dict[str,
     from dmtrack.odometry.vo import VisualOdometry
 
     seq = open_sequence(sequence)
-    feat = get_feature(feature_name)
+    feat = get_feature(feature_name, **({} if device is None else {"device": device}))
     config = VOConfig(init="random")  # the odometry alone
     if getattr(feat, "affine_brightness", False):
         config = config.with_overrides("tracker.affine=true")

@@ -30,7 +30,7 @@ LAYERS: list[set[str]] = [
     {"evaluation"},
     {"pipeline"},
     {"experiments"},
-    {"api", "cli"},
+    {"api", "cli", "__main__"},
 ]
 MAX_LINES = 800
 

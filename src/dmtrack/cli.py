@@ -20,10 +20,11 @@ from dmtrack.errors import DmtrackError, Interrupted
 from dmtrack.io.argtypes import fraction
 
 
-def _add_sequence_args(p: argparse.ArgumentParser) -> None:
+def _add_sequence_args(p: argparse.ArgumentParser, optional: bool = False) -> None:
     from dmtrack.datasets.registry import FORMATS
 
-    p.add_argument("sequence", help="sequence folder or video file, camera:N / rtsp://… / http(s)://… (live), or "
+    p.add_argument("sequence", nargs="?" if optional else None,
+                   help="sequence folder or video file, camera:N / rtsp://… / http(s)://… (live), or "
                    "synthetic[:key=value,...]")
     p.add_argument("--format", choices=FORMATS, help="force the dataset format instead of detecting it")
     p.add_argument(
@@ -112,6 +113,8 @@ def _print_summary(info: dict[str, Any]) -> None:
 def cmd_info(args: argparse.Namespace) -> int:
     from dmtrack.datasets import open_sequence
 
+    if args.sequence is None:  # the machine: versions and whether the network features can use a GPU
+        return _print_environment(args.json)
     seq = open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics)
     info = _sequence_summary(seq)
     if args.json:
@@ -119,6 +122,42 @@ def cmd_info(args: argparse.Namespace) -> int:
     else:
         _print_summary(info)
     return 0
+
+
+def _print_environment(as_json: bool) -> int:
+    import platform
+
+    import numba
+    import numpy as np
+
+    from dmtrack.features.device import gpu_line, gpu_status
+
+    env = {"dmtrack": __version__, "python": platform.python_version(), "numpy": np.__version__,
+           "numba": numba.__version__, "numba_threads": int(numba.config.NUMBA_NUM_THREADS), "gpu": gpu_status()}
+    if as_json:
+        print(json.dumps(env, indent=2))
+        return 0
+    print(f"dmtrack {env['dmtrack']}: python {env['python']}, numpy {env['numpy']}, numba {env['numba']} "
+          f"({env['numba_threads']} threads)")
+    print(gpu_line())
+    return 0
+
+
+def _device_spec(value: str) -> str:
+    """argparse type of ``--device``."""
+    from dmtrack.errors import InputError
+    from dmtrack.features.device import check_device
+
+    try:
+        return str(check_device(value))
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _add_device_arg(p: argparse.ArgumentParser, what: str = "the network features") -> None:
+    p.add_argument("--device", type=_device_spec, metavar="auto|cpu|cuda[:N]",
+                   help=f"where {what} run: auto (default: a CUDA GPU when PyTorch sees one, else the CPU), cpu, "
+                        "cuda or cuda:N; the hand-crafted features always run on the CPU")
 
 
 def _limit_threads(threads: int | None) -> None:
@@ -164,12 +203,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
     from dmtrack.features import get_feature
 
+    feature = get_feature(args.feature, **_feature_options(args.feature_opt, args.device))
     sequence, viewers = _run_viewers(args)
     try:
         result = run_to_directory(
             sequence,
             out,
-            feature=get_feature(args.feature, **_feature_options(args.feature_opt)),
+            feature=feature,
             config=config,
             start=args.start,
             max_frames=args.max_frames,
@@ -201,7 +241,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"start: geometric refused, random map (seed {m['seed']}) instead")
     if m.get("realtime"):
         print(f"realtime: {m['dropped_frames']} frames dropped")
-    print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms, "
+    where = f" on {m['device']} ({m['gpu']})" if m.get("gpu") else ""
+    print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms{where}, "
           f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms); "
           f"kernels compiled/loaded in {m['compile_s']:.1f} s before the first frame, not counted")
     if m.get("ate_rmse") is not None:
@@ -299,6 +340,9 @@ def cmd_features(args: argparse.Namespace) -> int:
     print(f"{'NAME-pcaK':<16} {'K':>4}  {'-':>8}  {'as NAME':<10} {'as NAME':<14} any name above reduced to its "
           "first K principal components: fit a basis with `dmtrack fit-pca --feature NAME --k K SEQUENCE...`, "
           "or pass --feature-opt pca=FILE.npz")
+    from dmtrack.features.device import gpu_line
+
+    print(gpu_line())
     return 0
 
 
@@ -323,7 +367,7 @@ def cmd_calibrate_scale(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings():  # "no calibration of its own" is what this command is about to measure
         warnings.simplefilter("ignore", UserWarning)
-        feature = get_feature(args.feature, **_feature_options(args.feature_opt))
+        feature = get_feature(args.feature, **_feature_options(args.feature_opt, args.device))
     images = _sample_images(args.sequences, args.frames, args.format, None)
     cal = calibrate_scale_detailed(feature, images, args.min_use_grad)
     result = {"feature": feature.name, "scale": cal.scale, "images": len(images), "min_use_grad": args.min_use_grad,
@@ -348,7 +392,7 @@ def cmd_fit_pca(args: argparse.Namespace) -> int:
     from dmtrack.features.base import user_pca_path
     from dmtrack.features.pca import calibrate_reduced, fit_pca
 
-    feature = get_feature(args.feature, **_feature_options(args.feature_opt))
+    feature = get_feature(args.feature, **_feature_options(args.feature_opt, args.device))
     images = _sample_images(args.sequences, args.frames, args.format, None)
     basis = fit_pca(feature, images, k=args.k, n_samples=args.samples, seed=args.seed)
     # the reduced feature's own default scale and channel counts, stored with the basis
@@ -368,8 +412,9 @@ def cmd_fit_pca(args: argparse.Namespace) -> int:
     return 0
 
 
-def _feature_options(items: list[str] | None) -> dict[str, Any]:
-    """``key=value`` feature options; values parsed as YAML scalars (numbers, true/false, strings)."""
+def _feature_options(items: list[str] | None, device: str | None = None) -> dict[str, Any]:
+    """``key=value`` feature options; values parsed as YAML scalars (numbers, true/false, strings); ``--device``
+    (when given) is the ``device`` option unless ``--feature-opt device=`` names one."""
     import yaml
 
     from dmtrack.errors import InputError
@@ -380,6 +425,8 @@ def _feature_options(items: list[str] | None) -> dict[str, Any]:
         if not sep or not key.strip():
             raise InputError(f"--feature-opt {item!r}: expected key=value")
         options[key.strip()] = yaml.safe_load(raw)
+    if device is not None:
+        options.setdefault("device", device)
     return options
 
 
@@ -411,8 +458,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    p = sub.add_parser("info", help="describe a sequence (format, frames, size, intrinsics, ground truth)")
-    _add_sequence_args(p)
+    p = sub.add_parser("info", help="describe a sequence (format, frames, size, intrinsics, ground truth); without "
+                       "one, this machine (versions, whether a GPU is usable)")
+    _add_sequence_args(p, optional=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_info)
 
@@ -434,6 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="first keyframe's depth: seeded random (the paper's), geometric (from the first frames' own "
                         "motion: tracked corners, essential matrix, bundle adjustment, stereo) or the dataset's depth "
                         "image (docs/initialization.md)")
+    _add_device_arg(p)
     p.add_argument("--slam", action="store_true",
                    help="SLAM: a keyframe graph with loop closures (Sim(3) alignment on the feature), optimised by "
                         "gtsam; trajectory.txt is the optimised one, the odometry's is trajectory_vo.txt "
@@ -493,6 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
         from dmtrack.datasets.registry import FORMATS
 
         p.add_argument("--format", choices=FORMATS, help="force the dataset format")
+        _add_device_arg(p, "the feature's network")
 
     p = sub.add_parser(
         "calibrate-scale",

@@ -88,3 +88,20 @@ def test_cli_parser() -> None:
     for bad in (["--minutes", "0"], ["--channels", "0"], ["--data", "kitti"]):
         with pytest.raises(SystemExit):
             parser.parse_args(["train-feature", "--out", "o", *bad])
+
+
+def test_device_option(tmp_path) -> None:
+    from dmtrack.features.device import cuda_problem
+
+    with pytest.raises(InputError, match="device must be"):
+        train(tmp_path / "x", TrainOptions(device="gpu", **SMALL))
+    problem = cuda_problem()
+    if problem is not None:  # a machine without a usable GPU: one line naming what is missing, nothing written
+        with pytest.raises(InputError) as exc:
+            train(tmp_path / "x", TrainOptions(device="cuda", **SMALL))
+        assert str(exc.value) == f"device=cuda: {problem}"
+    assert not (tmp_path / "x").exists()
+    parser = argparse.ArgumentParser()
+    add_train_parser(parser.add_subparsers(dest="command"))
+    assert parser.parse_args(["train-feature", "--out", "o"]).device == "cpu"
+    assert parser.parse_args(["train-feature", "--out", "o", "--device", "cuda:1"]).device == "cuda:1"

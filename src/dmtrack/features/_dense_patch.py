@@ -35,6 +35,7 @@ import numpy as np
 from dmtrack.errors import InputError
 from dmtrack.features import _nn
 from dmtrack.features.base import Feature
+from dmtrack.features.device import DeviceFeatureMixin
 from dmtrack.features.weights import find_weights, load_weights
 
 #: The two evaluation modes of a :class:`DensePatchFeature` (``normalise=``).
@@ -98,6 +99,11 @@ class PatchNet(ABC):
     @abstractmethod
     def dense_torch(self, torch: Any, t: Any, p: dict[str, Any], params: dict[str, np.ndarray]) -> Any:
         """Shift-and-stitch pass of the ``(1, 1, H + P - 1, W + P - 1)`` tensor ``t``: ``(1, D, H, W)``."""
+
+    def dense_params(self, params: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Arrays :meth:`dense_torch` reads from ``p`` besides the weights (kept on the device with them); it
+        builds them from ``params`` when ``p`` lacks them."""
+        return {}
 
     @abstractmethod
     def dense_numpy(self, x: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
@@ -203,7 +209,7 @@ class PatchNet(ABC):
         return out.reshape(h, w, self.dim) if pixels is None else out
 
 
-class DensePatchFeature(Feature):
+class DensePatchFeature(DeviceFeatureMixin, Feature):
     """A :class:`~dmtrack.features.base.Feature` evaluating a :class:`PatchNet` at every pixel.
 
     Subclasses set ``net`` (the :class:`PatchNet`), ``weights_key`` (the catalogue key of its weights,
@@ -219,7 +225,10 @@ class DensePatchFeature(Feature):
     normalise
         ``"local"`` (dense, fast; default) or ``"patch"`` (exact per-patch normalisation, slow).
     backend
-        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``.
+        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``: the CPU kernels.
+    device
+        ``"auto"`` (a CUDA GPU when PyTorch sees one, else the CPU kernels), ``"cpu"``, ``"cuda"``, ``"cuda:N"``
+        (:mod:`dmtrack.features.device`); the device path evaluates the ``"local"`` mode.
     """
 
     net: PatchNet
@@ -232,6 +241,7 @@ class DensePatchFeature(Feature):
         weights: str | os.PathLike[str] | None = None,
         normalise: str = "local",
         backend: str = "auto",
+        device: Any = "auto",
     ) -> None:
         super().__init__(scale)
         if normalise not in MODES:
@@ -240,8 +250,23 @@ class DensePatchFeature(Feature):
         self.backend = _nn.resolve_backend(backend)
         self.weights_path = find_weights(self.weights_key, weights)
         self.params = load_weights(self.weights_key, self.weights_path)
+        self._init_device("cpu" if normalise == "patch" and device == "auto" else device)
+        if self.runner is not None:
+            if normalise == "patch":
+                raise InputError(f"{self.net.label}: normalise='patch' runs on the CPU only (device='cpu')")
+            self._device_params = self.runner.params({**self.params, **self.net.dense_params(self.params)})
+
+    def _forward_device(self, image: np.ndarray, gain: float) -> Any:
+        """The ``"local"`` mode on the device: ``(1, D, H, W)`` times ``gain`` (the normalisation on the host)."""
+        runner = self.runner
+        assert runner is not None
+        t = runner.tensor(self.net.local_normalise(image))[None, None]
+        t = self.net.dense_torch(runner.torch, t, self._device_params, self.params)
+        return t.mul_(float(gain)) if gain != 1.0 else t
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        if self.runner is not None:
+            return self._on_device(image, gain)
         if self.normalise == "patch":
             return self.net.exact(image, self.params, gain=gain, backend=self.backend)
         return self.net.dense(self.net.local_normalise(image), self.params, gain, self.backend)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import os
+from typing import Any
 
 import numba
 import numpy as np
@@ -27,6 +28,7 @@ import scipy.fft
 from dmtrack.errors import InputError
 from dmtrack.features import _nn
 from dmtrack.features.base import Feature, prepare_image
+from dmtrack.features.device import DeviceFeatureMixin
 from dmtrack.features.weights import (
     CAFFE_BGR_MEAN,
     TORCHVISION_MEAN,
@@ -421,7 +423,7 @@ def _conv1_relu_fft(
     return out
 
 
-class AlexNetFeature(Feature):
+class AlexNetFeature(DeviceFeatureMixin, Feature):
     """Caffe BVLC AlexNet conv1 + ReLU, stride 1, zero padding 5: 96 channels (paper §2.1.2).
 
     Parameters
@@ -434,7 +436,11 @@ class AlexNetFeature(Feature):
         Default: searched in ``$DMTRACK_WEIGHTS`` and ``~/.cache/dmtrack/weights``
         (see :mod:`dmtrack.features.weights`).
     backend
-        ``"auto"`` (:data:`AUTO_BACKEND`, the FFT), ``"fft"``, ``"numpy"`` or ``"torch"`` (see :func:`conv1_relu`).
+        ``"auto"`` (:data:`AUTO_BACKEND`, the FFT), ``"fft"``, ``"numpy"`` or ``"torch"`` (see :func:`conv1_relu`):
+        the CPU kernels.
+    device
+        ``"auto"`` (a CUDA GPU when PyTorch sees one, else the CPU kernels), ``"cpu"``, ``"cuda"``, ``"cuda:N"``
+        (see :mod:`dmtrack.features.device`); on a GPU, ``alexnet-pcaK`` projects there before the transfer.
     """
 
     name = "alexnet"
@@ -451,6 +457,7 @@ class AlexNetFeature(Feature):
         scale: float = PAPER_SCALE,
         weights: str | os.PathLike[str] | None = None,
         backend: str = "auto",
+        device: Any = "auto",
     ) -> None:
         super().__init__(scale)
         self.backend = resolve_backend(backend)
@@ -458,10 +465,26 @@ class AlexNetFeature(Feature):
         self.weights_path = find_weights(self.weights_key, weights)
         self.conv1 = load_alexnet_conv1(self.weights_path)
         self.channels = int(self.conv1.weight.shape[0])
+        self._init_device(device)
+        if self.runner is not None:
+            self._device_params = self.runner.params({"weight": self.conv1.weight, "bias": self.conv1.bias})
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        if self.runner is not None:
+            return self._on_device(image, gain)
         x = alexnet_input(image, self.conv1)
         return conv1_relu(x, self.conv1, gain, self.backend, cache=self._cache)
+
+    def _forward_device(self, image: np.ndarray, gain: float) -> Any:
+        """``gain · ReLU(conv1)`` of the prepared image on the device: ``(1, N, H, W)`` channels-last."""
+        runner = self.runner
+        assert runner is not None
+        torch = runner.torch
+        x = runner.tensor(alexnet_input(image, self.conv1)).permute(2, 0, 1).unsqueeze(0)
+        x = x.contiguous(memory_format=torch.channels_last)
+        p = self._device_params  # gain > 0 commutes with the ReLU: folded into the kernels
+        y = torch.nn.functional.conv2d(x, p["weight"] * float(gain), p["bias"] * float(gain))
+        return y.clamp_(min=0.0)
 
     def compute_projected(self, image: np.ndarray, weight: np.ndarray, bias: np.ndarray) -> np.ndarray:
         """``weight @ compute(image) + bias`` per pixel, with the projection fused after conv1 (paper §3.4).
@@ -484,6 +507,8 @@ class AlexNetFeature(Feature):
         if weight.ndim != 2 or weight.shape[1] != self.channels:
             raise InputError(f"projection must be (K, {self.channels}), got {weight.shape}")
         img = prepare_image(image, colour=True)
+        if self.runner is not None:
+            return self.compute_projected_on_device(img, weight, np.asarray(bias, np.float32))
         x = alexnet_input(img, self.conv1)
         out = conv1_relu(
             x, self.conv1, self.scale, self.backend, project=(weight, np.asarray(bias, np.float32)), cache=self._cache
@@ -504,5 +529,6 @@ class AlexNet64Feature(AlexNetFeature):
         scale: float = 1.0,
         weights: str | os.PathLike[str] | None = None,
         backend: str = "auto",
+        device: Any = "auto",
     ) -> None:
-        super().__init__(scale, weights, backend)
+        super().__init__(scale, weights, backend, device)

@@ -114,6 +114,8 @@ class Feature(ABC):
     pyramid: PyramidPolicy = "downsample"
     affine_brightness: bool = False
     description: str = ""
+    #: Where the map is computed: ``"cpu"`` (the CPU kernels) or ``"cuda:N"`` (:mod:`dmtrack.features.device`).
+    device: str = "cpu"
 
     def __init__(self, scale: float = 1.0) -> None:
         self.scale = check_scale(scale)
@@ -233,6 +235,7 @@ class Feature(ABC):
             "needs_weights": bool(self.needs_weights),
             "pyramid": self.pyramid,
             "scale": float(self.scale),
+            "device": self.device,
             "description": self.description,
         }
 
@@ -535,6 +538,8 @@ def _accepted_options(factory: Callable[..., Any]) -> tuple[set[str], bool]:
 def _build(entry: FeatureEntry, scale: float | None, options: dict[str, Any]) -> Feature:
     factory = entry.resolve()
     accepted, var_kw = _accepted_options(factory)
+    if "device" in options and "device" not in accepted:
+        _cpu_only(entry.name, options.pop("device"))
     unknown = sorted(k for k in options if k not in accepted)
     if unknown and not var_kw:
         allowed = sorted(accepted - {"scale"})
@@ -560,6 +565,19 @@ def _build(entry: FeatureEntry, scale: float | None, options: dict[str, Any]) ->
         if not options_match(None, options, defaults):
             _warn_uncalibrated(feature, entry, defaults, given_scale=scale is not None)
     return feature
+
+
+def _cpu_only(name: str, device: Any) -> None:
+    """A feature without a device path asked for ``device``: fine for ``"auto"``/``"cpu"``; for a GPU, the clear
+    error when there is none (:func:`~dmtrack.features.device.resolve_device`), else a warning that it runs on the
+    CPU."""
+    from dmtrack.features.device import check_device, resolve_device
+
+    if check_device(device) in ("auto", "cpu"):
+        return
+    resolve_device(device)
+    warnings.warn(f"feature {name!r} has no GPU path: it runs on the CPU (device= applies to the network features)",
+                  UserWarning, stacklevel=4)
 
 
 def _warn_uncalibrated(feature: Feature, entry: FeatureEntry, defaults: dict[str, Any], given_scale: bool) -> None:

@@ -27,6 +27,7 @@ import numpy as np
 from dmtrack.errors import InputError
 from dmtrack.features import _nn
 from dmtrack.features.base import Feature
+from dmtrack.features.device import DeviceFeatureMixin
 from dmtrack.features.weights import load_disk
 
 DESC_DIM = 128
@@ -97,7 +98,7 @@ def disk_unet(x: Any, params: dict[str, Any]) -> Any:
     return bottom
 
 
-class DiskFeature(Feature):
+class DiskFeature(DeviceFeatureMixin, Feature):
     """DISK dense 128-D descriptors at every pixel (shipped "depth" weights; needs PyTorch).
 
     Parameters
@@ -107,6 +108,9 @@ class DiskFeature(Feature):
     weights
         A DISK checkpoint (``{'extractor': state_dict}`` or a bare ``unet.*`` state dict); default the shipped
         ``disk-depth-save.pth``.
+    device
+        ``"auto"`` (a CUDA GPU when PyTorch sees one, else the CPU), ``"cpu"``, ``"cuda"``, ``"cuda:N"``
+        (:mod:`dmtrack.features.device`).
     """
 
     name = "disk"
@@ -117,14 +121,33 @@ class DiskFeature(Feature):
     pyramid = "downsample"
     description = "DISK U-Net dense descriptors at full resolution (shipped 'depth' weights), 128-D"
 
-    def __init__(self, scale: float = DEFAULT_SCALE, weights: str | os.PathLike[str] | None = None) -> None:
+    def __init__(
+        self, scale: float = DEFAULT_SCALE, weights: str | os.PathLike[str] | None = None, device: Any = "auto"
+    ) -> None:
         super().__init__(scale)
         _nn.torch_module()  # a clear InputError when PyTorch is missing
         sd = load_disk(weights)
         _check_state_dict(sd)
-        self._params = _nn.torch_params(sd)
+        self._init_device(device)
+        self._params = _nn.torch_params(sd) if self.runner is None else self.runner.params(sd)
+
+    def _forward_device(self, image: np.ndarray, gain: float) -> Any:
+        """The descriptors of the prepared RGB image on the device: ``(1, 128, H, W)`` times ``gain``."""
+        runner = self.runner
+        assert runner is not None
+        f = runner.torch.nn.functional
+        h, w = image.shape[:2]
+        ph, pw = (-h) % DIVISOR, (-w) % DIVISOR
+        x = runner.tensor(image).permute(2, 0, 1)[None].float() / 255.0
+        if ph or pw:
+            x = f.pad(x, (0, pw, 0, ph), value=0.0)
+        x = x.contiguous(memory_format=runner.torch.channels_last)
+        y = disk_unet(x, self._params)[:, :DESC_DIM, :h, :w]
+        return y * float(gain) if gain != 1.0 else y
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        if self.runner is not None:
+            return self._on_device(image, gain)
         torch = _nn.torch_module()
         f = torch.nn.functional
         h, w = image.shape[:2]

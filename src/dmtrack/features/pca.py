@@ -7,11 +7,12 @@ variances.  :class:`ReducedFeature` applies the first K axes as a 1×1 projectio
     R(p) = W (F(p) − μ) = W F(p) + b,   W = components[:K] (K × N),  b = −W μ,
 
 then multiplies by its own scale.  A base feature may implement ``compute_projected(image, weight, bias)``
-to apply the projection itself (e.g. as a 1×1 convolution on the GPU before the transfer, as in the paper); it
+to apply the projection itself (AlexNet fuses it after conv1, dense SIFT where each descriptor is formed); it
 receives the prepared image (:func:`~dmtrack.features.base.prepare_image`), ``weight`` (K, N) and ``bias`` (K,)
 float32 (the reduced feature's scale already folded in) and must return ``(H, W, K)`` equal to
 ``base.compute(image) @ weight.T + bias`` — i.e. the projection of the base's *scaled* output.  Otherwise the
-projection is a BLAS matrix product on the CPU.
+projection is a BLAS matrix product on the CPU.  A base feature on a GPU (``runner`` set,
+:mod:`dmtrack.features.device`) applies it there, as a 1×1 convolution before the transfer, as in the paper.
 
 Each component's sign is fixed (its largest-magnitude entry is positive) so a basis is reproducible.
 """
@@ -360,6 +361,7 @@ class ReducedFeature(Feature):
         self.needs_torch = base.needs_torch
         self.needs_weights = base.needs_weights
         self.pyramid = base.pyramid
+        self.device = base.device
         self.description = f"{base.name} reduced to {k} principal components"
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
@@ -367,6 +369,8 @@ class ReducedFeature(Feature):
         if gain != 1.0:
             weight = weight * np.float32(gain)
             bias = bias * np.float32(gain)
+        if getattr(self.base, "runner", None) is not None:  # on the device, before the transfer (paper §3.4)
+            return self.base.compute_projected_on_device(image, weight, bias)  # type: ignore[attr-defined]
         projected = getattr(self.base, "compute_projected", None)
         if projected is not None:
             return np.asarray(projected(image, weight, bias), dtype=np.float32)

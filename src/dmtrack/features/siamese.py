@@ -233,7 +233,9 @@ class SiameseFeature(DensePatchFeature):
         ``"local"`` (dense, fast; default) or ``"patch"`` (exact per-patch mean, very slow) — see the module
         documentation.
     backend
-        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``.
+        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``: the CPU kernels.
+    device
+        ``"auto"``, ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (:class:`~dmtrack.features._dense_patch.DensePatchFeature`).
     """
 
     name = "siamese"
@@ -252,5 +254,6 @@ class SiameseFeature(DensePatchFeature):
         weights: str | os.PathLike[str] | None = None,
         normalise: str = "local",
         backend: str = "auto",
+        device: Any = "auto",
     ) -> None:
-        super().__init__(scale, weights, normalise, backend)
+        super().__init__(scale, weights, normalise, backend, device)

@@ -82,17 +82,26 @@ def same_value(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
+#: Options that choose where or how the same function is computed (``device``: CPU or GPU; ``backend``: which CPU
+#: kernels), not what: a calibration applies whatever their values.
+RUNTIME_OPTIONS = frozenset({"device", "backend"})
+
+
+def _calibrated(options: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in options.items() if k not in RUNTIME_OPTIONS}
+
+
 def options_match(recorded: dict[str, Any] | None, options: dict[str, Any] | None, defaults: dict[str, Any]) -> bool:
     """Whether a calibration measured with ``recorded`` options applies to a feature built with ``options``; both
     are completed with ``defaults`` (an entry recorded without options, or a feature built without any, means the
-    defaults), numbers compare by value (2 == 2.0)."""
-    a = {**defaults, **(recorded or {})}
-    b = {**defaults, **(options or {})}
+    defaults), numbers compare by value (2 == 2.0); :data:`RUNTIME_OPTIONS` do not count."""
+    a = _calibrated({**defaults, **(recorded or {})})
+    b = _calibrated({**defaults, **(options or {})})
     return a.keys() == b.keys() and all(same_value(a[k], b[k]) for k in a)
 
 
 def changed_options(options: dict[str, Any] | None, defaults: dict[str, Any]) -> dict[str, Any]:
     """The items of ``options`` whose value differs from ``defaults``' (by :func:`same_value`; an option without a
-    default counts as changed)."""
+    default counts as changed), :data:`RUNTIME_OPTIONS` left out."""
     missing = object()
-    return {k: v for k, v in (options or {}).items() if not same_value(v, defaults.get(k, missing))}
+    return {k: v for k, v in _calibrated(options or {}).items() if not same_value(v, defaults.get(k, missing))}

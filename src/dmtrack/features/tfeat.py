@@ -87,8 +87,11 @@ class TFeatNet(PatchNet):
         t = torch.tanh(f.conv2d(t, p["features.1.weight"], p["features.1.bias"]))
         t = f.max_pool2d(t, 2, stride=1).contiguous(memory_format=torch.channels_last)
         t = torch.tanh(f.conv2d(t, p["features.4.weight"], p["features.4.bias"], dilation=2))
-        lin = _nn.torch_params({"w": _linear_as_conv(params)})["w"]
+        lin = p["descr.0.conv"] if "descr.0.conv" in p else _nn.torch_params({"w": _linear_as_conv(params)})["w"]
         return torch.tanh(f.conv2d(t, lin, p["descr.0.bias"], dilation=2))
+
+    def dense_params(self, params: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {"descr.0.conv": _linear_as_conv(params)}
 
     def dense_numpy(self, x: np.ndarray, params: dict[str, np.ndarray]) -> np.ndarray:
         d1 = np.tanh(_nn.conv2d_hwc(x[:, :, None], params["features.1.weight"], params["features.1.bias"]))
@@ -245,7 +248,9 @@ class TFeatFeature(DensePatchFeature):
     normalise
         ``"local"`` (dense, default) or ``"patch"`` (exact per-patch InstanceNorm, slow) — see the module docs.
     backend
-        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``.
+        ``"auto"`` (PyTorch when installed, else numpy), ``"torch"`` or ``"numpy"``: the CPU kernels.
+    device
+        ``"auto"``, ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (:class:`~dmtrack.features._dense_patch.DensePatchFeature`).
     """
 
     name = "tfeat"
@@ -264,5 +269,6 @@ class TFeatFeature(DensePatchFeature):
         weights: str | os.PathLike[str] | None = None,
         normalise: str = "local",
         backend: str = "auto",
+        device: Any = "auto",
     ) -> None:
-        super().__init__(scale, weights, normalise, backend)
+        super().__init__(scale, weights, normalise, backend, device)

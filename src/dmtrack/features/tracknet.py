@@ -32,6 +32,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.features.base import Feature
+from dmtrack.features.device import DeviceFeatureMixin
 
 #: File name of the packaged default weights (in ``dmtrack/weights/``).
 DEFAULT_WEIGHTS = "tracknet-7s-synth.npz"
@@ -260,8 +261,8 @@ def _pointwise_tail(x, w1, b1, slope, w2, b2, gain, out):  # pragma: no cover - 
                 out[y, xx, j] = gain * a / (np.float32(1.0) + abs(a))
 
 
-def tracknet_forward(weights: TrackNetWeights, image: np.ndarray, gain: float = 1.0) -> np.ndarray:
-    """The network on a grey ``(H, W)`` image (uint8 or float 0..255): ``(H, W, K)`` float32 × ``gain``."""
+def _checked_image(weights: TrackNetWeights, image: np.ndarray) -> np.ndarray:
+    """``image`` as uint8 or float32 ``(H, W)``; :class:`InputError` for colour or too small an image."""
     img = np.asarray(image)
     if img.ndim != 2:
         raise InputError(f"tracknet needs a grey (H, W) image, got shape {img.shape}")
@@ -270,6 +271,32 @@ def tracknet_forward(weights: TrackNetWeights, image: np.ndarray, gain: float = 
     h, w = img.shape
     if h <= weights.radius or w <= weights.radius:
         raise InputError(f"image {w}x{h} is too small for tracknet (needs more than {weights.radius} pixels a side)")
+    return img
+
+
+def tracknet_torch(weights: TrackNetWeights, x: Any, params: dict[str, Any], gain: float = 1.0) -> Any:
+    """The network in PyTorch (the device path): ``(1, 1, H, W)`` float32 tensor → ``(1, K, H, W)`` × ``gain``.
+
+    ``params`` holds the layers as tensors on ``x``'s device: ``spatial{i}.weight`` / ``.bias``, ``tail1.*``
+    (absent without a hidden 1×1 layer) and ``tail2.*`` (:meth:`TrackNetFeature.__init__`)."""
+    import torch
+
+    f = torch.nn.functional
+    slope = float(weights.slope)
+    for i, (kern, _) in enumerate(weights.spatial):
+        r = kern.shape[2] // 2
+        x = f.pad(x, (r, r, r, r), mode="reflect")  # = BORDER_REFLECT_101
+        x = f.leaky_relu(f.conv2d(x, params[f"spatial{i}.weight"], params[f"spatial{i}.bias"]), slope)
+    if "tail1.weight" in params:
+        x = f.leaky_relu(f.conv2d(x, params["tail1.weight"][:, :, None, None], params["tail1.bias"]), slope)
+    a = f.conv2d(x, params["tail2.weight"][:, :, None, None], params["tail2.bias"])
+    return a.div_(a.abs().add_(1.0)).mul_(float(gain))
+
+
+def tracknet_forward(weights: TrackNetWeights, image: np.ndarray, gain: float = 1.0) -> np.ndarray:
+    """The network on a grey ``(H, W)`` image (uint8 or float 0..255): ``(H, W, K)`` float32 × ``gain``."""
+    img = _checked_image(weights, image)
+    h, w = img.shape
     x: np.ndarray = np.ascontiguousarray(img)[None]
     for kern, bias in weights.spatial:
         out = np.empty((kern.shape[0], h, w), np.float32)
@@ -282,7 +309,7 @@ def tracknet_forward(weights: TrackNetWeights, image: np.ndarray, gain: float = 
 
 
 # ------------------------------------------------------------------------------------------------ feature
-class TrackNetFeature(Feature):
+class TrackNetFeature(DeviceFeatureMixin, Feature):
     """The ``tracknet`` feature (see the module documentation).
 
     Parameters
@@ -293,19 +320,42 @@ class TrackNetFeature(Feature):
         A tracknet ``.npz``; default: the packaged weights (:data:`DEFAULT_WEIGHTS`). The registry's default scale
         is the packaged file's: with another file pass its own scale too (``meta["scale"]`` after
         :func:`dmtrack.training.train.calibrate_weights`, or ``dmtrack calibrate-scale``).
+    device : str
+        ``"auto"`` (a CUDA GPU when PyTorch sees one, else the numba kernels), ``"cpu"``, ``"cuda"``, ``"cuda:N"``
+        (:mod:`dmtrack.features.device`).
     """
 
     name = "tracknet"
     channels = 8
     description = "small CNN trained through the tracker's alignment, 8-D"
 
-    def __init__(self, scale: float = 1.0, weights: str | os.PathLike[str] | None = None) -> None:
+    def __init__(
+        self, scale: float = 1.0, weights: str | os.PathLike[str] | None = None, device: Any = "auto"
+    ) -> None:
         super().__init__(scale)
         self.weights = load_tracknet(weights)
         self.channels = self.weights.channels
         self.packaged = weights is None
+        self._init_device(device)
+        if self.runner is not None:
+            arrays = {}
+            for i, (kern, bias) in enumerate(self.weights.spatial):
+                arrays[f"spatial{i}.weight"], arrays[f"spatial{i}.bias"] = kern, bias
+            (w1, b1), (w2, b2) = self.weights.tail
+            if w1.shape[0]:
+                arrays["tail1.weight"], arrays["tail1.bias"] = w1, b1
+            arrays["tail2.weight"], arrays["tail2.bias"] = w2, b2
+            self._device_params = self.runner.params(arrays)
+
+    def _forward_device(self, image: np.ndarray, gain: float) -> Any:
+        runner = self.runner
+        assert runner is not None
+        x = runner.tensor(_checked_image(self.weights, image)).float()[None, None]
+        return tracknet_torch(self.weights, x, self._device_params, gain)
 
     def _compute(self, image: np.ndarray, gain: float) -> np.ndarray:
+        if self.runner is not None:
+            return self._on_device(image, gain)
         return tracknet_forward(self.weights, image, gain)
 
     def _file_stat(self, key: str, power: int) -> float | None:

@@ -78,6 +78,7 @@ def track(
     realtime: bool = False,
     warmup: bool = True,
     slam: Any = None,
+    device: str | None = None,
 ) -> RunResult:
     """Track ``sequence`` with ``feature``.
 
@@ -106,6 +107,9 @@ def track(
     slam : True or a :class:`~dmtrack.slam.backend.SlamConfig`: the keyframes also enter a keyframe graph with loop
         closures, optimised by gtsam (``pip install 'dmtrack[slam]'``); the result's trajectory is then the
         optimised one (docs/slam.md).
+    device : where a network feature given by name runs: ``"auto"`` (a CUDA GPU when PyTorch sees one, else the
+        CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (:mod:`dmtrack.features.device`); None: the feature's
+        default (``"auto"``). The hand-crafted features always run on the CPU.
 
     Raises
     ------
@@ -115,7 +119,7 @@ def track(
     result = _track(
         sequence, feature, config, start=start, max_frames=max_frames, seed=seed, init=init, sink=sink,
         format=format, intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
-        slam=slam,
+        slam=slam, device=device,
     )
     _raise_halt([result])
     return result
@@ -165,6 +169,7 @@ def track_many(
     progress: bool | None = False,
     realtime: bool = False,
     warmup: bool = True,
+    device: str | None = None,
 ) -> list[RunResult]:
     """Track ``sequence`` with one feature and several odometry configurations in lockstep.
 
@@ -182,7 +187,7 @@ def track_many(
     """
     results = _track_many(
         sequence, feature, configs, start=start, max_frames=max_frames, sinks=sinks, format=format,
-        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
+        intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup, device=device,
     )
     _raise_halt(results)
     return results
@@ -203,6 +208,7 @@ def _track_many(
     realtime: bool = False,
     warmup: bool = True,
     slam: Any = None,
+    device: str | None = None,
 ) -> list[RunResult]:
     """:func:`track_many` without re-raising ``halted_by``; a live source is closed when the run ends."""
     if not configs:
@@ -214,7 +220,7 @@ def _track_many(
     seq = _open(sequence, format, intrinsics)
     try:
         run = SequenceRun(seq, feature, configs, sinks, start=start, max_frames=max_frames, realtime=realtime,
-                          slam=slam)
+                          slam=slam, device=device)
         return run.run(warmup=warmup, progress=progress, r_l=r_l)
     finally:
         live = live_source(seq)

@@ -135,6 +135,8 @@ def metrics_dict(
         "height": camera.height,
         "channels": int(getattr(feature, "channels", 0)),
         "feature_scale": _finite(getattr(feature, "scale", None)),
+        "device": str(getattr(feature, "device", "cpu")),
+        "gpu": _gpu_name(feature),
         "seed": int(config.seed),
         "channel_cost": config.channel_cost,
         "energy_channels": _finite(config.energy_channels),
@@ -163,6 +165,12 @@ def metrics_dict(
             m.update(ate_rmse=None, rpe_rot_deg_per_m=None, rpe_trans_angle_deg_per_m=None, matched_poses=0)
             m["evaluation_error"] = str(e)
     return m
+
+
+def _gpu_name(feature: Any) -> str | None:
+    """The name of the GPU the feature (or a reduced feature's base) runs on, None on the CPU."""
+    runner = getattr(feature, "runner", None) or getattr(getattr(feature, "base", None), "runner", None)
+    return getattr(runner, "name", None)
 
 
 def _slam_metrics(slam: Any) -> dict[str, Any]:

@@ -38,11 +38,16 @@ from dmtrack.pipeline.signals import _StopBetweenFrames
 Prepared = tuple[float, np.ndarray, Any, float, float, "np.ndarray | None"]
 
 
-def feature_of(feature: Any) -> Any:
-    """A Feature object for a registry name (or the object itself)."""
+def feature_of(feature: Any, device: Any = None) -> Any:
+    """A Feature object for a registry name, built on ``device`` when given (or the object itself: ``device`` is
+    then an error, the object was built where it runs)."""
     from dmtrack.features import get_feature
 
-    return get_feature(feature) if isinstance(feature, str) else feature
+    if isinstance(feature, str):
+        return get_feature(feature, **({} if device is None else {"device": device}))
+    if device is not None:
+        raise InputError("device= applies to a feature given by name; build the Feature object with device= instead")
+    return feature
 
 
 def for_feature(config: VOConfig, feat: Any) -> VOConfig:
@@ -76,6 +81,7 @@ class SequenceRun:
         max_frames: int | None = None,
         realtime: bool = False,
         slam: Any = None,
+        device: Any = None,
     ) -> None:
         if seq.camera is None:
             raise InputError(
@@ -85,7 +91,7 @@ class SequenceRun:
         self.seq, self.start, self.realtime = seq, int(start), bool(realtime)
         self.live = live_source(seq) is not None
         self.stop = self._stop(max_frames)
-        self.feature = feat = feature_of(feature)
+        self.feature = feat = feature_of(feature, device)
         self.configs = configs = [for_feature(c, feat) for c in configs]
         self.n_levels = configs[0].pyramid_levels
         if any(c.pyramid_levels != self.n_levels for c in configs):
@@ -101,8 +107,10 @@ class SequenceRun:
                     f"init='groundtruth': the depth images of {seq.name!r} are not registered to the colour camera"
                 )
         # every check above comes before the back ends' threads start
-        self.slams = [_slam_backend(feat, c, slam) for c in configs] if slam else [None] * len(configs)
-        sinks = [s if b is None else (b if s is None else MultiSink(s, b)) for s, b in zip(sinks, self.slams,
+        self.slams = ([_slam_backend(feat, c, slam, s) for c, s in zip(configs, sinks, strict=True)] if slam
+                      else [None] * len(configs))
+        # the back end first: it closes (its final optimisation, told to a viewer) before the run's sinks close
+        sinks = [s if b is None else (b if s is None else MultiSink(b, s)) for s, b in zip(sinks, self.slams,
                                                                                            strict=True)]
         self.vos = [VisualOdometry(self.camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
         self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
@@ -317,11 +325,14 @@ def _warm_up_slam() -> float:
     return time.perf_counter() - t0
 
 
-def _slam_backend(feat: Any, config: VOConfig, slam: Any) -> Any:
-    """A SLAM back end on its own thread (``slam``: True or a :class:`~dmtrack.slam.backend.SlamConfig`)."""
+def _slam_backend(feat: Any, config: VOConfig, slam: Any, sink: OutputSink | None = None) -> Any:
+    """A SLAM back end on its own thread (``slam``: True or a :class:`~dmtrack.slam.backend.SlamConfig`); the
+    sinks in ``sink`` that are graph listeners (the viewer) are told of its optimisations."""
     from dmtrack.slam.backend import SlamBackend, SlamConfig, ThreadedSlam
+    from dmtrack.slam.listener import graph_listeners
 
-    return ThreadedSlam(SlamBackend(feat, config, slam if isinstance(slam, SlamConfig) else SlamConfig()))
+    cfg = slam if isinstance(slam, SlamConfig) else SlamConfig()
+    return ThreadedSlam(SlamBackend(feat, config, cfg, listeners=graph_listeners(sink)))
 
 
 def _groundtruth_span(seq: Sequence, start: int, stop: int) -> Trajectory | None:

@@ -328,11 +328,11 @@ def se3_exp(xi: torch.Tensor) -> torch.Tensor:
         ]
     )
     W2 = Wm @ Wm
-    eye = torch.eye(3, dtype=xi.dtype)
+    eye = torch.eye(3, dtype=xi.dtype, device=xi.device)
     R = eye + a * Wm + bb * W2
     V = eye + bb * Wm + cc * W2
     top = torch.cat([R, (V @ v)[:, None]], 1)
-    bottom = torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=xi.dtype)
+    bottom = torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=xi.dtype, device=xi.device)
     return torch.cat([top, bottom], 0)
 
 
@@ -353,7 +353,7 @@ def lm_step(
     """
     ev = evaluate(points, ref_values, variances, feat, T, prm, packed)
     if ev.n_in == 0:
-        return T, torch.zeros(6, dtype=feat.dtype), ev, False
+        return T, torch.zeros(6, dtype=feat.dtype, device=feat.device), ev, False
     H, b = normal_equations(ev)
     delta, ok = solve_damped(H, b, lam)
     return se3_exp(delta) @ T, delta, ev, ok

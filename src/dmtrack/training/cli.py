@@ -36,6 +36,7 @@ def cmd_train_feature(args: argparse.Namespace) -> int:
         mapping_frames=args.mapping_frames,
         threads=args.threads,
         lr_schedule=args.lr_schedule,
+        device=args.device,
     )
 
     def say(msg: str) -> None:
@@ -93,6 +94,9 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
                    help="learning rate: constant 1e-3 (default), or cosine from 1e-3 to 5e-5 over --steps")
     p.add_argument("--threads", type=positive_int, default=1, metavar="N",
                    help="torch and numba threads (default 1: faster than 2 when other jobs share the cores)")
+    p.add_argument("--device", default="cpu", metavar="cpu|cuda[:N]|auto",
+                   help="where the network and the unrolled alignment run (default cpu; a GPU run is deterministic "
+                        "on its own, not equal to the CPU's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=cmd_train_feature)

@@ -44,10 +44,9 @@ checkpoint), ``checkpoint.pt`` (model, optimiser, step), ``train_log.csv`` (one 
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
+import os
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -61,11 +60,13 @@ import torch
 
 from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
 from dmtrack.errors import InputError
+from dmtrack.features.device import check_device, resolve_device
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.atomic import atomic_path, prepare_folder, write_bytes, write_text
 from dmtrack.odometry._tracker_points import idepth_downsample_numpy, make_points_numpy
 from dmtrack.odometry.config import TrackerConfig
 from dmtrack.training.alignment import AlignParams, lm_step, pack
+from dmtrack.training.log import plot_curve, write_log
 from dmtrack.training.model import TrackNet, export_npz
 from dmtrack.training.realdata import MixedPairs, Pair, SequencePairs
 
@@ -149,6 +150,9 @@ class TrainOptions:
         badly (its OpenMP workers wait for each other).
     checkpoint_every : int
         Steps between checkpoints.
+    device : str
+        Where the network and the unrolled alignment run: ``"cpu"`` (default), ``"cuda"``, ``"cuda:N"`` or
+        ``"auto"`` (:mod:`dmtrack.features.device`; a GPU run is deterministic on its own, not equal to the CPU's).
     """
 
     seed: int = 0
@@ -186,6 +190,7 @@ class TrainOptions:
     val_pairs: int = 16
     threads: int = 1
     checkpoint_every: int = 100
+    device: str = "cpu"
 
     def check(self) -> None:
         """:class:`InputError` on impossible options."""
@@ -210,6 +215,7 @@ class TrainOptions:
             raise InputError(f"--steps must be ≥ 0, got {self.steps}")
         if len(self.iterations) != len(self.levels) or len(self.level_weights) != len(self.levels):
             raise InputError("levels, iterations and level_weights must have the same length")
+        check_device(self.device)
         w, h = self.crop
         div = 1 << max(self.levels)
         if w % div or h % div or w > 640 or h > 480:
@@ -392,9 +398,10 @@ def calibrated_gain(net: TrackNet, images: list[np.ndarray], min_use_grad: float
 
     target = sum(count_semi_dense(np.asarray(im, np.float32)[:, :, None], min_use_grad) for im in images)
     values = []
+    dev = next(net.parameters()).device
     with torch.no_grad():
         for im in images:
-            f = net(to_tensor(im))[0].permute(1, 2, 0).contiguous().numpy()
+            f = net(to_tensor(im, dev))[0].permute(1, 2, 0).contiguous().cpu().numpy()
             g = channel_mean_gradient(np.ascontiguousarray(f, np.float32)).ravel()
             values.append(g[g > 0])
     v = np.concatenate(values)
@@ -454,12 +461,12 @@ def align_pair(
     tracker: TrackerConfig,
 ) -> PairResult:
     """Unroll the steps on one pair's feature pyramids; the loss on the poses after each level."""
-    dtype = fk[0].dtype
-    T = torch.tensor(T0, dtype=dtype)
-    T_true = torch.tensor(pair.T_fk, dtype=dtype)
+    dtype, dev = fk[0].dtype, fk[0].device
+    T = torch.tensor(T0, dtype=dtype, device=dev)
+    T_true = torch.tensor(pair.T_fk, dtype=dtype, device=dev)
     finest = refs[min(opts.levels)]
-    eval_pts = torch.tensor(finest.points, dtype=dtype)
-    loss = torch.zeros((), dtype=dtype)
+    eval_pts = torch.tensor(finest.points, dtype=dtype, device=dev)
+    loss = torch.zeros((), dtype=dtype, device=dev)
     with torch.no_grad():
         init_px = float(reprojection_distance(eval_pts, T, T_true, pair.camera).mean())
     level_px = []
@@ -468,9 +475,9 @@ def align_pair(
         lp = refs[lvl]
         feat_k, feat_f = fk[lvl], ff[lvl]
         nch = feat_k.shape[2]
-        pts = torch.tensor(lp.points, dtype=dtype)
-        var = torch.tensor(lp.variances, dtype=dtype)
-        vals = feat_k.reshape(-1, nch)[torch.from_numpy(lp.index)]
+        pts = torch.tensor(lp.points, dtype=dtype, device=dev)
+        var = torch.tensor(lp.variances, dtype=dtype, device=dev)
+        vals = feat_k.reshape(-1, nch)[torch.from_numpy(lp.index).to(dev)]
         prm = AlignParams.of(pair.camera.level(lvl), tracker, nch)
         packed = pack(feat_f)
         for _ in range(its):
@@ -486,8 +493,10 @@ def align_pair(
     return PairResult(loss, init_px, final_px, level_px, ok)
 
 
-def to_tensor(img: np.ndarray) -> torch.Tensor:
-    return torch.from_numpy(np.asarray(img, np.float32))[None, None]
+def to_tensor(img: np.ndarray, device: Any = None) -> torch.Tensor:
+    """A grey image as a ``(1, 1, H, W)`` float32 tensor (on ``device`` when given)."""
+    t = torch.from_numpy(np.asarray(img, np.float32))[None, None]
+    return t if device is None else t.to(device)
 
 
 # ============================================================================================ validation
@@ -547,13 +556,12 @@ class TrainResult:
     files: dict[str, str] = field(default_factory=dict)
 
 
-LOG_COLUMNS = ("step", "seconds", "lr", "loss", "scale_term", "default_scale", "init_px", "final_px", "grad_norm",
-               "skipped")  # fmt: skip
 
 
 def _checkpoint(net: TrackNet, optim: torch.optim.Optimizer, step: int, out: Path, meta: dict[str, Any]) -> None:
     with atomic_path(out / "checkpoint.pt") as tmp:
-        torch.save({"model": net.state_dict(), "optimizer": optim.state_dict(), "step": step}, tmp)
+        model = {k: v.detach().cpu() for k, v in net.state_dict().items()}  # loads anywhere, as the CPU's
+        torch.save({"model": model, "optimizer": optim.state_dict(), "step": step}, tmp)
     export_npz(net, out / "tracknet.npz", **meta, steps=step)
 
 
@@ -568,6 +576,7 @@ def train(out: str | Path, opts: TrainOptions, progress: Callable[[str], None] |
         ``out`` cannot be written.
     """
     opts.check()
+    dev = resolve_device(opts.device) or torch.device("cpu")  # one line naming what is missing for "cuda"
     out = prepare_folder(out)
     say = progress or (lambda _msg: None)
     t_start = time.perf_counter()
@@ -576,19 +585,24 @@ def train(out: str | Path, opts: TrainOptions, progress: Callable[[str], None] |
     prev_numba = numba.get_num_threads()
     torch.set_num_threads(int(opts.threads))
     numba.set_num_threads(min(int(opts.threads), numba.config.NUMBA_NUM_THREADS))
+    if dev.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS (PyTorch's rule)
+        torch.backends.cudnn.benchmark = False
+        torch.backends.cudnn.allow_tf32 = False
+        torch.backends.cuda.matmul.allow_tf32 = False
     torch.use_deterministic_algorithms(True)
     try:
-        return _train(out, opts, say, t_start)
+        return _train(out, opts, say, t_start, dev)
     finally:
         torch.set_num_threads(prev_threads)
         numba.set_num_threads(prev_numba)
         torch.use_deterministic_algorithms(prev_det)
 
 
-def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: float) -> TrainResult:
+def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: float, dev: Any) -> TrainResult:
     torch.manual_seed(opts.seed)
     rng = np.random.default_rng(opts.seed)
-    net = TrackNet(opts.channels, opts.hidden, opts.kernels)
+    net = TrackNet(opts.channels, opts.hidden, opts.kernels).to(dev)
     optim = torch.optim.Adam(net.parameters(), lr=opts.lr)
     tracker = TrackerConfig()
     data = training_pairs(opts, rng, say)
@@ -601,10 +615,10 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
         return {"seed": opts.seed, "data": opts.data, "gain": gain, "options": asdict(opts)}
 
     def net_features(img: np.ndarray) -> torch.Tensor:
-        return net(to_tensor(img))[0] * gain
+        return net(to_tensor(img, dev))[0] * gain
 
     def grey_features(img: np.ndarray) -> torch.Tensor:
-        return to_tensor(img)[0]
+        return to_tensor(img, dev)[0]
 
     val = make_validation(opts) if opts.val_pairs > 0 else None
     validation: dict[str, dict[str, float]] = {}
@@ -628,7 +642,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
                 pair.idepth, pair.camera, opts.levels, rng, opts.point_fraction, opts.max_points, pair.var
             )
             T0 = perturb(pair.T_fk, rng, opts.init_trans, opts.init_rot_deg, opts.identity_init)
-            maps = net(torch.cat([to_tensor(pair.key_image), to_tensor(pair.frame_image)])) * gain
+            maps = net(torch.cat([to_tensor(pair.key_image, dev), to_tensor(pair.frame_image, dev)])) * gain
             fk = pyramid(maps[0].to(torch.float64), n_levels)
             ff = pyramid(maps[1].to(torch.float64), n_levels)
             res = align_pair(fk, ff, refs, pair, T0, opts, tracker)
@@ -667,7 +681,7 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
         )
         if step % opts.checkpoint_every == 0:
             _checkpoint(net, optim, step, out, meta())
-            _write_log(out, rows)
+            write_log(out, rows)
             recent = rows[-opts.checkpoint_every :]
             say(f"step {step}: loss {np.nanmean([r['loss'] for r in recent]):.3f}, final "
                 f"{np.nanmean([r['final_px'] for r in recent]):.2f} px, default scale {scale:.1f} (G {gain:g}) "
@@ -683,8 +697,8 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
         "log_csv": str(out / "train_log.csv"),
         "log_json": str(out / "train_log.json"),
     }
-    _write_log(out, rows)
-    png = _plot(out, rows)
+    write_log(out, rows)
+    png = plot_curve(out, rows)
     if png is not None:
         files["curve"] = str(png)
     summary = {
@@ -704,54 +718,6 @@ def _train(out: Path, opts: TrainOptions, say: Callable[[str], None], t_start: f
 def _fmt(v: dict[str, float]) -> str:
     return (f"{v['init_px']:.2f} px -> mean {v['final_px']:.2f} px, median {v['final_px_median']:.2f} px, "
             f"{100 * v['within_1px']:.0f}% within 1 px")  # fmt: skip
-
-
-def _write_log(out: Path, rows: list[dict[str, Any]]) -> None:
-    buf = io.StringIO()
-    wr = csv.DictWriter(buf, fieldnames=LOG_COLUMNS, lineterminator="\n")
-    wr.writeheader()
-    for r in rows:
-        wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    write_text(out / "train_log.csv", buf.getvalue())
-
-
-def _plot(out: Path, rows: list[dict[str, Any]]) -> Path | None:
-    """``training_curve.png``: loss and final reprojection error per step (and a running mean); None without
-    matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # pragma: no cover - matplotlib is a dependency
-        return None
-    if not rows:
-        return None
-    steps = np.array([r["step"] for r in rows])
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for ax, key, label in ((axes[0], "loss", "loss"), (axes[1], "final_px", "final reprojection error (px)")):
-        v = np.array([r[key] for r in rows], float)
-        ax.plot(steps, v, lw=0.5, alpha=0.4, color="tab:blue")
-        win = max(1, len(v) // 20)
-        ok = np.isfinite(v)
-        if ok.sum() >= win:
-            kern = np.ones(win) / win
-            sm = np.convolve(np.where(ok, v, np.nanmean(v)), kern, mode="valid")
-            ax.plot(steps[win - 1 :], sm, color="tab:blue", label=f"mean of {win}")
-            ax.legend()
-        if key == "final_px":
-            init = np.array([r["init_px"] for r in rows], float)
-            ax.axhline(float(np.nanmean(init)), color="grey", ls="--", lw=1, label="initial (mean)")
-            ax.set_yscale("log")
-        ax.set_xlabel("step")
-        ax.set_ylabel(label)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    path = out / "training_curve.png"
-    write_bytes(path, buf.getvalue())
-    return path
 
 
 # ============================================================================================ after training

@@ -89,3 +89,30 @@ def test_points_world_is_computed_once(runs: tuple) -> None:
     fewer, _ = snap.points_world(max_var=3e-3)
     assert 0 < len(fewer) < len(pts) and snap.points_world()[0] is not pts  # a new max_var replaces the cache
     np.testing.assert_array_equal(snap.points_world()[0], pts)
+
+
+def test_multisink_closes_every_child_when_one_fails() -> None:
+    """A child that fails to close (a full disk, an interrupt) does not leave the others open; its error is raised."""
+
+    class Failing(MemorySink):
+        def close(self) -> None:
+            super().close()
+            raise OSError("disk full")
+
+    first, failing, last = MemorySink(), Failing(), MemorySink()
+    with pytest.raises(OSError, match="disk full"):
+        MultiSink(first, failing, last).close()
+    assert first.closed and failing.closed and last.closed
+
+
+def test_graph_listeners_are_found_inside_fan_out_sinks() -> None:
+    from dmtrack.slam.listener import graph_listeners
+
+    class Viewer(MemorySink):
+        def on_graph_optimised(self, graph: object) -> None:
+            pass
+
+    viewer, other = Viewer(), Viewer()
+    plain = MemorySink()
+    assert graph_listeners(MultiSink(plain, MultiSink(viewer, plain), viewer), None, other) == [viewer, other]
+    assert graph_listeners(plain, None) == []

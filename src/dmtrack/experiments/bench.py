@@ -82,6 +82,18 @@ def _progress_bar(total: int, initial_note: str, enabled: bool | None) -> Any:
     return tqdm(total=total, desc=f"bench{initial_note}", unit="run", disable=disable, dynamic_ncols=True)
 
 
+def _check_runtime(device: str | None, modes: Sequence[str]) -> None:
+    """Before any run: ``device`` can be used (one line naming what is missing) and gtsam is there for SLAM."""
+    if device is not None:
+        from dmtrack.features.device import resolve_device
+
+        resolve_device(device)
+    if "slam" in modes:
+        from dmtrack.slam.pose_graph import gtsam_module
+
+        gtsam_module()
+
+
 def _write_bench_json(out: Path, tasks: list[RunTask], resolved: list[ResolvedSequence], features: Sequence[str],
                       options: dict[str, Any]) -> None:  # fmt: skip
     path = out / BENCH_JSON
@@ -135,6 +147,8 @@ def run_bench(
     figures: bool = True,
     progress: bool | None = None,
     log: Callable[[str], None] | None = None,
+    device: str | None = None,
+    modes: Sequence[str] = ("vo",),
 ) -> BenchResult:
     """Run the grid ``sequences × features`` into ``out_dir`` and write the report.
 
@@ -157,6 +171,10 @@ def run_bench(
     report, figures : write ``report.md`` + CSVs (+ figures) at the end.
     progress : progress bar (None: only on a terminal and not under CI).
     log : called with one line per finished run (e.g. ``print``).
+    device : where the network features run, ``"auto"``, ``"cpu"``, ``"cuda"``, ``"cuda:N"`` (None: their
+        default); checked here, before any run.
+    modes : ``("vo",)`` (default), ``("slam",)`` or both: every feature once per mode, the SLAM cells labelled
+        ``<feature>+slam`` (needs gtsam, checked here).
 
     Returns
     -------
@@ -171,16 +189,18 @@ def run_bench(
     tasks, resolved = plan_grid(
         sequences, features, out, start=start, max_frames=max_frames, seed=seed, r_l=r_l, format=format,
         intrinsics=intrinsics, config=config, overrides=overrides, depth_images=depth_images,
-        pointcloud=pointcloud, threads_per_job=threads_per_job, seeds=seeds,
+        pointcloud=pointcloud, threads_per_job=threads_per_job, seeds=seeds, device=device, modes=modes,
     )  # fmt: skip
+    _check_runtime(device, modes)
     prepare_folder(out / RUNS_DIR)
     clean_stale(out)
     options = {"start": start, "max_frames": max_frames, "seed": seed,
                "seeds": None if seeds is None else list(cell_seeds), "r_l": r_l, "format": format,
                "intrinsics": intrinsics, "overrides": list(overrides), "depth_images": depth_images,
                "pointcloud": pointcloud, "jobs": jobs, "scheduler": scheduler,
-               "threads_per_job": threads_per_job}  # fmt: skip
-    _write_bench_json(out, tasks, resolved, features, options)
+               "threads_per_job": threads_per_job, "device": device, "modes": list(modes)}  # fmt: skip
+    labels = list(dict.fromkeys(t.feature for t in tasks))
+    _write_bench_json(out, tasks, resolved, labels, options)
 
     result = BenchResult(out, tasks, resolved)
     todo = []

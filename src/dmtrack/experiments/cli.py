@@ -120,6 +120,19 @@ def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
         choices=("random", "geometric", "groundtruth"),
         help="how every run's first keyframe map is made (default: the configuration's; docs/initialization.md)",
     )
+    p.add_argument(
+        "--modes",
+        default="vo",
+        metavar="vo,slam",
+        help="run every feature as the odometry alone (vo, the default), with the SLAM back end (slam; cells named "
+        "FEATURE+slam; pip install 'dmtrack[slam]') or both (vo,slam), side by side in the tables",
+    )
+    p.add_argument(
+        "--device",
+        metavar="auto|cpu|cuda[:N]",
+        help="where the network features run (default auto: a CUDA GPU when PyTorch sees one, else the CPU); "
+        "recorded in every run's spec",
+    )
     p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
     p.add_argument(
         "--set",
@@ -185,6 +198,7 @@ def _check_features(names: list[str]) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     from dmtrack.experiments.bench import run_bench
     from dmtrack.experiments.grid import SequenceSpec, load_sequences_file
+    from dmtrack.features.device import check_device
     from dmtrack.io.bench_layout import format_seeds, parse_seeds
 
     seeds: list[int] | None = None
@@ -225,7 +239,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
                   "same run; add --init random to compare the random starts", file=sys.stderr)
     jobs = args.jobs if args.jobs is not None else max(1, _usable_cpus() // args.threads_per_job)
     n_seeds = len(seeds) if seeds else 1
-    jobs = min(jobs, len(sequences) * len(features) * n_seeds) if jobs > 0 else 0
+    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    jobs = min(jobs, len(sequences) * len(features) * len(modes) * n_seeds) if jobs > 0 else 0
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -237,6 +252,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         config=config, overrides=overrides, depth_images=not args.no_depth_images,
         pointcloud=not args.no_pointcloud, threads_per_job=args.threads_per_job, skip_failed=args.skip_failed,
         report=not args.no_report, figures=not args.no_figures, progress=args.progress, log=log,
+        device=None if args.device is None else check_device(args.device), modes=modes,
     )  # fmt: skip
     statuses = [o["status"] for o in result.outcomes.values()]
     n_cells = len(result.tasks) // n_seeds

@@ -262,9 +262,19 @@ def make_spec(
     overrides: Sequence[str],
     depth_images: bool,
     pointcloud: bool,
+    device: str | None = None,
+    slam: bool = False,
 ) -> dict[str, Any]:
-    """The run spec stored in ``spec.json`` and compared on resume (see :mod:`dmtrack.experiments.store`)."""
+    """The run spec stored in ``spec.json`` and compared on resume (see :mod:`dmtrack.experiments.store`).
+
+    ``device`` (where a network feature runs) and ``slam`` enter the spec only when given, so that the folders
+    of benches made before they existed still resume."""
     s = seq.spec
+    extra: dict[str, Any] = {}
+    if device is not None:
+        extra["device"] = device
+    if slam:
+        extra["slam"] = True
     return normalise(
         {
             "spec_version": SPEC_VERSION,
@@ -282,6 +292,7 @@ def make_spec(
             "depth_images": bool(depth_images),
             "pointcloud": bool(pointcloud),
             "dmtrack_version": __version__,
+            **extra,
         }
     )
 
@@ -303,6 +314,8 @@ def plan_grid(
     pointcloud: bool = True,
     threads_per_job: int = 1,
     seeds: Sequence[int] | str | None = None,
+    device: str | None = None,
+    modes: Sequence[str] = ("vo",),
 ) -> tuple[list[RunTask], list[ResolvedSequence]]:
     """The tasks of the grid ``sequences × features`` (× ``seeds``; sequence-major order) and the resolved
     sequences.
@@ -311,7 +324,9 @@ def plan_grid(
     ``overrides`` (``"section.key=value"``) are applied; both are validated here.  Sequence names that
     collide get ``-2``, ``-3``… appended.  ``seeds`` (a list or ``"0-2,5"``) runs every cell once per seed,
     each into ``<feature>/seed-<S>/`` when there are several (``seed`` and ``seeds`` exclude each other; one
-    seed is the same as ``seed``).
+    seed is the same as ``seed``).  ``modes`` (``"vo"``, ``"slam"``) runs every feature once per mode; a
+    ``"slam"`` cell is labelled ``<feature>+slam`` (:func:`mode_label`).  ``device``: where the network features
+    run (:mod:`dmtrack.features.device`; None: their default).
     """
     from dmtrack.odometry.config import VOConfig
 
@@ -322,6 +337,7 @@ def plan_grid(
         raise InputError("no sequences given")
     if len(set(features)) != len(features):
         raise InputError(f"a feature is listed twice: {list(features)}")
+    modes = check_modes(modes)
     cfg = config if config is not None else VOConfig()
     if overrides:
         cfg = cfg.with_overrides(*overrides)
@@ -340,15 +356,37 @@ def plan_grid(
     tasks = []
     for rs in resolved:
         for f in features:
-            for s in cell_seeds:
-                spec = make_spec(
-                    rs, f, start=start, max_frames=max_frames, seed=s, r_l=r_l, format=format,
-                    intrinsics=intrinsics, config=cfg_dict, overrides=overrides, depth_images=depth_images,
-                    pointcloud=pointcloud,
-                )  # fmt: skip
-                sub = seed_dir_name(s) if len(cell_seeds) > 1 and s is not None else None
-                tasks.append(RunTask(bench_dir, rs.name, f, spec, rs.dataset, threads_per_job, rs.unit, sub))
+            for mode in modes:
+                for s in cell_seeds:
+                    spec = make_spec(
+                        rs, f, start=start, max_frames=max_frames, seed=s, r_l=r_l, format=format,
+                        intrinsics=intrinsics, config=cfg_dict, overrides=overrides, depth_images=depth_images,
+                        pointcloud=pointcloud, device=device, slam=mode == "slam",
+                    )  # fmt: skip
+                    sub = seed_dir_name(s) if len(cell_seeds) > 1 and s is not None else None
+                    tasks.append(RunTask(bench_dir, rs.name, mode_label(f, mode), spec, rs.dataset, threads_per_job,
+                                         rs.unit, sub))  # fmt: skip
     return tasks, resolved
+
+
+#: The modes of a bench cell: the odometry alone, or with the SLAM back end (docs/slam.md).
+MODES = ("vo", "slam")
+
+
+def check_modes(modes: Sequence[str]) -> tuple[str, ...]:
+    """``modes`` validated (known, not repeated, at least one)."""
+    out = tuple(str(m).strip().lower() for m in modes)
+    if not out:
+        raise InputError("no mode given (vo, slam)")
+    bad = [m for m in out if m not in MODES]
+    if bad or len(set(out)) != len(out):
+        raise InputError(f"modes must be distinct values of {', '.join(MODES)}, got {list(modes)}")
+    return out
+
+
+def mode_label(feature: str, mode: str) -> str:
+    """The cell's name in the bench (its folder, its rows): ``feature``, or ``feature+slam`` for SLAM."""
+    return feature if mode == "vo" else f"{feature}+{mode}"
 
 
 def seed_list(seed: int | None, seeds: Sequence[int] | str | None) -> list[int | None]:

@@ -251,6 +251,8 @@ def execute_task(task: RunTask) -> Outcome:
                 pointcloud=spec["pointcloud"],
                 extra_sinks=(counter,),
                 progress=False,
+                device=spec.get("device"),
+                slam=True if spec.get("slam") else None,
             )
         except Exception as e:  # a crash of this run must not stop the grid
             (tmp / METRICS_JSON).unlink(missing_ok=True)

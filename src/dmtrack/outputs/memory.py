@@ -44,7 +44,7 @@ class MultiSink:
     The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers) and ``on_initial_map``
     exist only when at least one of ``sinks`` has them, and go to those; so a fan-out to sinks without them costs the
     odometry nothing.
-    The children are fixed when the MultiSink is made.
+    The children are fixed when the MultiSink is made. :meth:`close` closes each of them even when one fails.
     """
 
     def __init__(self, *sinks: OutputSink):
@@ -84,5 +84,12 @@ class MultiSink:
             s.on_lost(frame_index, reason)
 
     def close(self) -> None:
+        """Close every child, in order, even when one raises; the first exception is raised afterwards."""
+        error: BaseException | None = None
         for s in self.sinks:
-            s.close()
+            try:
+                s.close()
+            except BaseException as e:  # noqa: BLE001 - raised below, after the others are closed
+                error = error or e
+        if error is not None:
+            raise error

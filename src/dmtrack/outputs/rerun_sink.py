@@ -15,6 +15,11 @@ or absent; open it with ``rerun FILE``), or to both.
 ``world/keyframes/N``              keyframe N's pose and frustum
 ``world/points/N``                 keyframe N's semi-dense points (world frame, coloured by its image), logged
                                    when its depth map is final
+``world/slam/keyframes``           SLAM (``--slam``), after each optimisation of the graph: the keyframes at
+                                   their optimised poses (points), at the newest keyframe's frame
+``world/slam/trajectory``          the optimised keyframes joined in order (LineStrips3D)
+``world/slam/edges/odometry``,     the graph's accepted edges as segments between the optimised keyframes: the
+``world/slam/edges/loop``          odometry's (grey) and the loop closures (magenta)
 ``keyframe/depth``                 the current keyframe's inverse depth over its image, coloured as
                                    :func:`dmtrack.viz.depth.inverse_depth_image` (per frame, downscaled)
 ``world/initial_map``, ``keyframe/initial_map``  the first keyframe's map as the start made it (random, geometric,
@@ -30,6 +35,9 @@ or absent; open it with ``rerun FILE``), or to both.
 Timelines: ``frame`` (the frame index) and ``time`` (the dataset's timestamp: a date for Unix times, otherwise a
 duration in seconds). The images, depth overlay and statistics need the optional sink method ``on_frame_info``
 (:class:`~dmtrack.odometry.sink.FrameInfo`); the poses, trajectory and points come through the four standard ones.
+The ``world/slam`` entities come from the SLAM back end, which calls the sink's ``on_graph_optimised``
+(:class:`~dmtrack.slam.listener.GraphListener`) from its own thread; the odometry's entities stay where the
+odometry put them.
 
 The ground truth is given in the dataset's frame; the sink maps it into the estimate's frame with a similarity
 found by ``align`` — :func:`dmtrack.evaluation.alignment.umeyama`, passed in by the caller because the evaluation
@@ -56,6 +64,7 @@ from dmtrack.io.association import associate
 from dmtrack.io.atomic import atomic_path
 from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry.sink import FrameInfo, KeyframeSnapshot
+from dmtrack.slam.listener import OptimisedGraph
 from dmtrack.viz.depth import inverse_depth_image
 
 #: Application id of every recording dmtrack makes.
@@ -71,6 +80,9 @@ TIMING_SERIES = ("pyramid", "tracking", "mapping", "odometry", "frame")
 #: Largest time difference (seconds) when matching ground-truth and estimated poses, as the run's metrics.
 GROUNDTRUTH_MAX_DIFF = 0.01
 _UNIX_TIME = 1e8  # timestamps above this (1973) are Unix times
+#: Colours of the SLAM layer: the optimised keyframes and their path, odometry edges, loop edges.
+SLAM_COLOUR = (250, 200, 40)
+EDGE_COLOURS = {"odometry": (150, 150, 150), "loop": (230, 40, 200)}
 
 
 def import_rerun() -> Any:
@@ -275,6 +287,21 @@ def jpeg(rr: Any, image: np.ndarray, quality: int) -> Any:
     return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
 
 
+def log_graph(
+    rr: Any, stream: Any, positions: np.ndarray, segments: dict[str, np.ndarray], static: bool = False
+) -> None:
+    """The ``world/slam`` entities: keyframe centres ``(n, 3)`` (in keyframe order) and, by edge kind
+    (``odometry``, ``loop``), the edges' end points ``(m, 2, 3)``; every kind of :data:`EDGE_COLOURS` is logged
+    (empty when it has no edge), so that a later graph replaces an earlier one."""
+    pos = np.asarray(positions, dtype=np.float32).reshape(-1, 3)
+    stream.log("world/slam/keyframes", rr.Points3D(pos, colors=[SLAM_COLOUR], radii=[-4.0]), static=static)
+    stream.log("world/slam/trajectory", rr.LineStrips3D([pos], colors=[SLAM_COLOUR], radii=[-1.5]), static=static)
+    for kind, colour in EDGE_COLOURS.items():
+        seg = np.asarray(segments.get(kind, np.zeros((0, 2, 3))), dtype=np.float32).reshape(-1, 2, 3)
+        stream.log(f"world/slam/edges/{kind}", rr.LineStrips3D(list(seg), colors=[colour], radii=[-1.0]),
+                   static=static)  # fmt: skip
+
+
 class RerunSink:
     """Logs a run to the Rerun viewer and/or an .rrd file (see the module docstring for what is logged).
 
@@ -337,6 +364,7 @@ class RerunSink:
         self.n_frames = 0
         self.n_keyframes = 0
         self.n_points = 0
+        self.n_graph_updates = 0
         self._closed = False
 
     # ------------------------------------------------------------------ helpers
@@ -466,6 +494,21 @@ class RerunSink:
             ms.append(1e3 * (now - self._last_wall))
         self._last_wall = now
         self.stream.log("timing", rr.Scalars(ms))
+
+    def on_graph_optimised(self, graph: OptimisedGraph) -> None:
+        """The SLAM graph after an optimisation (:class:`~dmtrack.slam.listener.GraphListener`; called from the
+        back end's thread): the keyframes at their optimised poses and the accepted edges, at the newest keyframe's
+        frame. Ignored once the sink is closed."""
+        if self._closed or len(graph.keyframe_ids) == 0:
+            return
+        self._at(int(graph.frame_indices[-1]), float(graph.timestamps[-1]))  # this thread's time
+        log_graph(self.rr, self.stream, graph.positions, {k: graph.segments(k) for k in EDGE_COLOURS})
+        loops = sum(1 for e in graph.edges if e[2] == "loop")
+        self.stream.log("log", self.rr.TextLog(
+            f"graph optimised ({graph.optimisation}{', final' if graph.final else ''}): "
+            f"{len(graph.keyframe_ids)} keyframes, {loops} loop closures", level=self.rr.TextLogLevel.INFO,
+        ))  # fmt: skip
+        self.n_graph_updates += 1
 
     def close(self) -> None:
         """Log the final ground-truth alignment, then close the recording (the .rrd moves into place)."""

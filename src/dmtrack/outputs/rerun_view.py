@@ -15,6 +15,20 @@ with the entity paths of the live :class:`~dmtrack.outputs.rerun_sink.RerunSink`
 ``run/metrics``, ``run/config``   ``metrics.json`` as a table and ``config.yaml``
 ================================  =====================================================================================
 
+A SLAM run folder (``dmtrack run --slam``: ``graph.json`` and ``trajectory_vo.txt`` in it) is drawn as both
+trajectories, the optimised one and the odometry's, and the keyframe graph:
+
+================================  =====================================================================================
+``world/trajectory/slam``         ``trajectory.txt``, the optimised path (instead of ``world/trajectory/estimate``;
+                                  ``world/camera`` and the ground truth's alignment follow it)
+``world/trajectory/odometry``     ``trajectory_vo.txt``, the odometry's own path
+``world/keyframes``               the odometry's keyframes (``keyframes_vo.txt``)
+``world/slam/keyframes``,         ``graph.json``: the keyframes at their optimised poses, joined in order, and the
+``world/slam/trajectory``,        accepted edges as segments, odometry edges grey, loop closures magenta (as the
+``world/slam/edges/odometry``,    live viewer draws them)
+``world/slam/edges/loop``
+================================  =====================================================================================
+
 The path, the keyframes, the points and the documents are static (shown at every time); the camera moves along the
 ``frame`` timeline. The run folder holds no intrinsics, so the camera is drawn as axes, not as a frustum. Frame
 indices come from ``metrics.json`` when the run tracked its frames without a gap (``start`` … ``start + n − 1``);
@@ -34,7 +48,15 @@ from dmtrack.errors import InputError
 from dmtrack.io.files import read_bytes, read_text_file
 from dmtrack.io.ply import read_ply
 from dmtrack.io.trajectory import Trajectory, read_tum
-from dmtrack.outputs.rerun_sink import Aligner, Recording, aligned_groundtruth, import_rerun
+from dmtrack.outputs.rerun_sink import (
+    SLAM_COLOUR,
+    Aligner,
+    Recording,
+    aligned_groundtruth,
+    import_rerun,
+    log_graph,
+)
+from dmtrack.outputs.slam_files import read_graph
 
 _DEPTH_NAME = re.compile(r"kf_(\d+)_frame_(\d+)\.png")
 _UNIX_TIME = 1e8
@@ -106,8 +128,9 @@ def log_run_folder(
 
     Returns
     -------
-    dict with ``poses``, ``keyframes``, ``points``, ``depth_images`` (counts), ``frames_are_indices`` and
-    ``groundtruth`` (``"aligned"``, ``"not aligned"`` or ``"none"``).
+    dict with ``poses``, ``keyframes``, ``points``, ``depth_images`` (counts), ``frames_are_indices``,
+    ``groundtruth`` (``"aligned"``, ``"not aligned"`` or ``"none"``) and ``slam``: ``None``, or for a SLAM run
+    folder the counts of ``graph.json``'s ``keyframes`` and accepted edges by kind (``odometry``, ``loop``).
 
     Raises
     ------
@@ -122,7 +145,11 @@ def log_run_folder(
     import_rerun()  # before reading large files: a missing rerun-sdk fails at once
     traj = read_tum(run / "trajectory.txt")
     no_keyframes = Trajectory(np.zeros(0), np.zeros((0, 4, 4)))
-    kfs = read_tum(run / "keyframes.txt") if (run / "keyframes.txt").is_file() else no_keyframes
+    slam = (run / "graph.json").is_file() and (run / "trajectory_vo.txt").is_file()
+    vo = read_tum(run / "trajectory_vo.txt") if slam else None
+    graph = read_graph(run / "graph.json") if slam else None
+    kf_file = run / ("keyframes_vo.txt" if slam and (run / "keyframes_vo.txt").is_file() else "keyframes.txt")
+    kfs = read_tum(kf_file) if kf_file.is_file() else no_keyframes
     gt = read_tum(run / "groundtruth.txt") if (run / "groundtruth.txt").is_file() else None
     metrics = _metrics(run)
     config = read_text_file(run / "config.yaml", "run configuration") if (run / "config.yaml").is_file() else None
@@ -153,10 +180,15 @@ def log_run_folder(
             )
             stream.log("world/camera", rr.TransformAxes3D(axis_length), static=True)
             stream.log(
-                "world/trajectory/estimate",
-                rr.LineStrips3D([traj.positions], colors=[[230, 80, 40]], radii=[-1.5]),
+                "world/trajectory/slam" if slam else "world/trajectory/estimate",
+                rr.LineStrips3D([traj.positions], colors=[SLAM_COLOUR if slam else (230, 80, 40)], radii=[-1.5]),
                 static=True,
             )
+        if vo is not None and len(vo):
+            stream.log("world/trajectory/odometry",
+                       rr.LineStrips3D([vo.positions], colors=[[230, 80, 40]], radii=[-1.5]), static=True)  # fmt: skip
+        if graph is not None:
+            log_graph(rr, stream, graph.positions, graph.segments, static=True)
         if gt_positions is not None:
             stream.log(
                 "world/trajectory/groundtruth",
@@ -198,4 +230,6 @@ def log_run_folder(
         "initial_map": initial is not None,
         "frames_are_indices": are_indices,
         "groundtruth": "none" if gt is None else "aligned" if gt_positions is not None else "not aligned",
+        "slam": None if graph is None else {"keyframes": len(graph.positions),
+                                            **{k: len(v) for k, v in graph.segments.items()}},
     }

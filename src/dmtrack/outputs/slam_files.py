@@ -13,19 +13,28 @@ end that fails, or a run that is stopped, never loses the odometry's trajectory.
                      = pose of j in i, the reciprocal consistencies).
 
 When the back end failed (``slam_error`` in metrics.json), the plain names get the odometry's files instead.
+:func:`read_graph` reads ``graph.json`` back for the viewer (``dmtrack view``) and the report.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from dmtrack.errors import InputError
 from dmtrack.geometry.lie import Sim3
 from dmtrack.io.atomic import write_text
+from dmtrack.io.files import read_text_file
 from dmtrack.io.ply import write_ply
 from dmtrack.io.trajectory import write_tum
+
+#: The kinds of edge in ``graph.json``.
+EDGE_KINDS = ("odometry", "loop")
 
 
 def _matrix(S: Sim3 | None) -> list[list[float]] | None:
@@ -69,3 +78,47 @@ def write_slam_outputs(out: Path, result: Any) -> None:
     # one keyframe or edge per line: readable, and diffable between runs
     parts = [f'"{k}": [\n' + ",\n".join(json.dumps(item) for item in g[k]) + "\n]" for k in ("keyframes", "edges")]
     write_text(out / "graph.json", "{" + ",\n".join(parts) + "}\n")
+
+
+@dataclass(frozen=True)
+class GraphFile:
+    """``graph.json`` read back: ``keyframe_ids`` ``(n,)`` and ``positions`` ``(n, 3)``, the keyframes' optimised
+    camera centres (the odometry's for a keyframe the graph never optimised); ``segments``: for each kind of
+    :data:`EDGE_KINDS`, the accepted edges' end points ``(m, 2, 3)``; ``rejected``: the loop candidates the
+    reciprocal test refused."""
+
+    keyframe_ids: np.ndarray
+    positions: np.ndarray
+    segments: dict[str, np.ndarray]
+    rejected: int
+
+
+def read_graph(path: Path) -> GraphFile:
+    """Read ``graph.json`` (see the module docstring); an :class:`~dmtrack.errors.InputError` naming the file when
+    it is not one."""
+    try:
+        graph = json.loads(read_text_file(path, "SLAM graph"))
+        centre: dict[int, np.ndarray] = {}
+        for kf in graph["keyframes"]:
+            S = kf.get("sim3") or kf.get("vo_sim3")
+            if S is not None:
+                centre[int(kf["id"])] = np.asarray(S, dtype=np.float64).reshape(4, 4)[:3, 3]
+        pairs: dict[str, list[np.ndarray]] = {kind: [] for kind in EDGE_KINDS}
+        rejected = 0
+        for e in graph["edges"]:
+            i, j = int(e["i"]), int(e["j"])
+            if not e["accepted"]:
+                rejected += 1
+            elif i in centre and j in centre:
+                pairs.setdefault(str(e["kind"]), []).append(np.stack([centre[i], centre[j]]))
+    except json.JSONDecodeError as e:
+        raise InputError(f"not valid JSON: {e.msg} (line {e.lineno})", path) from None
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise InputError(f"not a SLAM graph (keyframes and edges): {type(e).__name__}: {e}", path) from None
+    ids = sorted(centre)
+    return GraphFile(
+        np.array(ids, dtype=np.int64),
+        np.array([centre[k] for k in ids], dtype=np.float64).reshape(-1, 3),
+        {k: np.array(v, dtype=np.float64).reshape(-1, 2, 3) for k, v in pairs.items()},
+        rejected,
+    )

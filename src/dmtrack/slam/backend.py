@@ -12,7 +12,8 @@ know it exists. For each keyframe it
    where the reciprocal test costs 50);
 3. looks for loop candidates (:mod:`~dmtrack.slam.candidates`) among the keyframes at least ``min_gap`` before it
    and tests each from the graph's current poses; every accepted pair adds two edges;
-4. optimises the graph after new loop edges (at most every ``optimise_every`` keyframes), and once at the end.
+4. optimises the graph after new loop edges (at most every ``optimise_every`` keyframes), and once at the end,
+   and tells its listeners (:mod:`~dmtrack.slam.listener`: a viewer) the optimised poses and the accepted edges.
 
 The trajectory of the run is then every frame's pose relative to the keyframe it was tracked against, composed
 with that keyframe's optimised pose (:meth:`trajectory`).
@@ -20,8 +21,11 @@ with that keyframe's optimised pose (:meth:`trajectory`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
+import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,6 +39,7 @@ from dmtrack.odometry.sink import KeyframeSnapshot
 from dmtrack.odometry.tracker import TrackingReference
 from dmtrack.slam.candidates import CandidateSearch
 from dmtrack.slam.constraints import Constraint, KeyframeView, reciprocal_test
+from dmtrack.slam.listener import GraphListener, OptimisedGraph
 from dmtrack.slam.pose_graph import PoseGraph
 from dmtrack.slam.sim3_tracker import Sim3Tracker
 
@@ -128,10 +133,13 @@ class SlamBackend:
     feature : the run's Feature (its maps of the keyframes' images are aligned).
     config : the run's odometry configuration (pyramid, tracker settings, channel rule).
     slam : :class:`SlamConfig`.
+    listeners : :class:`~dmtrack.slam.listener.GraphListener` s told of every optimisation (e.g. the viewer); one
+        that raises is dropped, its error kept in :attr:`listener_errors`, and the back end goes on.
     """
 
     def __init__(
-        self, feature: Any, config: VOConfig, slam: SlamConfig | None = None, max_point_var: float | None = None
+        self, feature: Any, config: VOConfig, slam: SlamConfig | None = None, max_point_var: float | None = None,
+        listeners: Iterable[GraphListener] = (),
     ) -> None:
         self.feature = feature
         self.max_point_var = max_point_var
@@ -149,6 +157,8 @@ class SlamBackend:
         self._views: dict[int, KeyframeView] = {}  # kf_id → view, least recently used first
         self._pending_loops = 0  # loop edges added since the last optimisation
         self._last_optimised = 0  # the newest keyframe at the last optimisation
+        self.listeners: list[GraphListener] = list(listeners)
+        self.listener_errors: list[str] = []
 
     # -- the sink ----------------------------------------------------------------------------------------------------
 
@@ -176,7 +186,7 @@ class SlamBackend:
 
     def close(self) -> None:
         if len(self.keyframes) > 1:
-            self._optimise()
+            self._optimise(final=True)
 
     # -- keyframes and edges -----------------------------------------------------------------------------------------
 
@@ -280,14 +290,48 @@ class SlamBackend:
         self.graph.add_edge(b.kf_id, a.kf_id, c.S_ab, c.information_ab, kind=kind)
         self.stats.edges.append(GraphEdge(a.kf_id, b.kf_id, kind, True, c.S_ba, c.consistency))
 
-    def _optimise(self) -> None:
+    def _optimise(self, final: bool = False) -> None:
         self._pending_loops = 0
         self._last_optimised = max(self.keyframes, default=0)
         result = self.graph.optimise()
         self.stats.optimisation_ms += result.ms
         self.stats.optimisations += 1
+        if self.listeners:
+            self._tell_listeners(final)
+
+    def _tell_listeners(self, final: bool) -> None:
+        """Hand the optimised graph to every listener; one that raises is dropped (never the back end)."""
+        graph = self.optimised_graph(final)
+        for listener in list(self.listeners):
+            try:
+                listener.on_graph_optimised(graph)
+            except Exception as e:  # noqa: BLE001 - a viewer's failure must not stop the back end
+                self.listeners.remove(listener)
+                message = f"{type(listener).__name__}.on_graph_optimised: {type(e).__name__}: {e}"
+                self.listener_errors.append(message)
+                with contextlib.suppress(Exception):  # warnings turned into errors: the error is kept above
+                    warnings.warn(f"SLAM graph listener dropped: {message}", RuntimeWarning, stacklevel=2)
 
     # -- results -----------------------------------------------------------------------------------------------------
+
+    def optimised_graph(self, final: bool = False) -> OptimisedGraph:
+        """The keyframes in the graph at their current (optimised) poses and the accepted edges."""
+        poses = self.graph.poses
+        ids = sorted(k for k in poses if k in self.keyframes)
+        T = np.tile(np.eye(4), (len(ids), 1, 1))
+        for r, k in enumerate(ids):
+            T[r, :3, :3] = poses[k].rotation.matrix()
+            T[r, :3, 3] = poses[k].translation
+        return OptimisedGraph(
+            keyframe_ids=np.array(ids, dtype=np.int64),
+            frame_indices=np.array([self.keyframes[k].frame_index for k in ids], dtype=np.int64),
+            timestamps=np.array([self.keyframes[k].timestamp for k in ids], dtype=np.float64),
+            poses=T,
+            scales=np.array([poses[k].scale for k in ids], dtype=np.float64),
+            edges=tuple((e.i, e.j, e.kind) for e in self.stats.edges if e.accepted),
+            optimisation=self.stats.optimisations,
+            final=final,
+        )
 
     def keyframe_poses(self) -> dict[int, Sim3]:
         """Optimised Sim3 pose (keyframe units → world) of every keyframe in the graph."""

@@ -18,13 +18,15 @@ from dmtrack.evaluation.html.page import SUBPLOT_MARGIN, base_layout, esc, thin
 
 @dataclass(frozen=True)
 class Line:
-    """One trajectory of a top view: ``(N, 3)`` camera centres in the world frame, a label and a colour."""
+    """One trajectory of a top view: ``(N, 3)`` camera centres in the world frame, a label and a colour;
+    ``segments``: ``positions`` are ``(M, 2, 3)`` end points of separate segments (e.g. a graph's edges)."""
 
     label: str
     positions: np.ndarray
     colour: str
     dash: str = "solid"
     markers: bool = False
+    segments: bool = False
 
 
 def topview_figure(lines: Sequence[Line], basis: np.ndarray, title: str, unit: str) -> Any:
@@ -35,6 +37,9 @@ def topview_figure(lines: Sequence[Line], basis: np.ndarray, title: str, unit: s
     fig = go.Figure()
     for ln in lines:
         if len(ln.positions) == 0:
+            continue
+        if ln.segments:
+            _add_segments(fig, ln, basis)
             continue
         p = thin(np.asarray(ln.positions, dtype=np.float64) @ np.asarray(basis).T)
         fig.add_trace(go.Scatter(
@@ -50,6 +55,17 @@ def topview_figure(lines: Sequence[Line], basis: np.ndarray, title: str, unit: s
     fig.update_xaxes(title_text=f"axis 1 [{esc(unit)}]", zeroline=False)
     fig.update_yaxes(title_text=f"axis 2 [{esc(unit)}]", scaleanchor="x", scaleratio=1, zeroline=False)
     return fig
+
+
+def _add_segments(fig: Any, ln: Line, basis: np.ndarray) -> None:
+    import plotly.graph_objects as go
+
+    ends = np.asarray(ln.positions, dtype=np.float64).reshape(-1, 2, 3) @ np.asarray(basis).T  # (M, 2, 2)
+    gaps = np.full((len(ends), 1, 2), np.nan)
+    p = np.concatenate([ends, gaps], axis=1).reshape(-1, 2).astype(np.float32)  # a gap after each segment
+    fig.add_trace(go.Scatter(x=p[:, 0], y=p[:, 1], name=esc(ln.label), mode="lines", connectgaps=False,
+                             line={"color": ln.colour, "width": 1.2, "dash": ln.dash},
+                             hovertemplate=esc(ln.label) + "<br>(%{x:.3f}, %{y:.3f})<extra></extra>"))  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,12 @@
 """``report.html`` of one run folder (``dmtrack run … --out DIR``, or one run of a bench).
 
-The page shows what ``metrics.json`` says (the numbers formatted as in ``report.md``) and draws, from the run's
-files, the time per frame, a top view of the trajectory with its keyframes — Sim(3)-aligned to
-``groundtruth.txt`` by :func:`dmtrack.evaluation.metrics.ate` when the run has one — the position error of the
-aligned estimate against the distance travelled along the ground truth, the paper's RPE per path length
-(:func:`dmtrack.evaluation.metrics.evaluate`), and up to :data:`MAX_DEPTH_PICTURES` keyframe depth pictures
-scaled down and embedded as PNG.  A file that is missing or unreadable is said on the page; only an unreadable
-``metrics.json`` stops the report.
+The page shows what ``metrics.json`` says (the numbers formatted as in ``report.md``) — for a SLAM run also the
+odometry against SLAM (:mod:`.slam`) — and draws, from the run's files, the time per frame, a top view of the
+trajectory with its keyframes — Sim(3)-aligned to ``groundtruth.txt`` by :func:`dmtrack.evaluation.metrics.ate`
+when the run has one — the position error of the aligned estimate against the distance travelled along the ground
+truth, the paper's RPE per path length (:func:`dmtrack.evaluation.metrics.evaluate`), and up to
+:data:`MAX_DEPTH_PICTURES` keyframe depth pictures scaled down and embedded as PNG.  A file that is missing or
+unreadable is said on the page; only an unreadable ``metrics.json`` stops the report.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 from dmtrack.errors import DmtrackError, InputError
 from dmtrack.evaluation.html.figures import Curve, Line, rpe_figure, topview_figure
 from dmtrack.evaluation.html.page import Page, axis_basis_text, base_layout, colour, esc, key_value_table, thin
+from dmtrack.evaluation.html.slam import SlamTracks, is_slam_run, slam_section
 from dmtrack.evaluation.rankings import value_of
 from dmtrack.evaluation.tables import fmt_value
 from dmtrack.io.bench_layout import GROUNDTRUTH_TXT, METRICS_JSON, RUN_INFO_JSON, TRAJECTORY_TXT, length_unit, read_json
@@ -182,13 +183,16 @@ class _Tracks:
 
     def positions(self, traj: Any) -> np.ndarray:
         """Camera centres of ``traj``, mapped by the Sim(3) alignment when there is one."""
-        p = traj.positions
+        return self.map_points(traj.positions)
+
+    def map_points(self, p: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` points of the estimate's frame, mapped by the Sim(3) alignment when there is one."""
         if self.aligned:
             p = p @ self._T[:3, :3].T + self._T[:3, 3]
         return p
 
 
-def _trajectory(page: Page, tracks: _Tracks, m: dict[str, Any], unit: str) -> None:
+def _trajectory(page: Page, tracks: _Tracks, m: dict[str, Any], unit: str, slam: SlamTracks | None = None) -> None:
     from dmtrack.viz.plots import topview_basis
 
     page.heading(2, "Trajectory", toc=True)
@@ -199,7 +203,9 @@ def _trajectory(page: Page, tracks: _Tracks, m: dict[str, Any], unit: str) -> No
     if tracks.gt is not None and tracks.aligned:
         lines.append(Line("ground truth", tracks.gt.positions, "#222222", dash="dash"))
     label = f"{m.get('feature', 'estimate')} [{fmt_value(m.get('tracked_frames'))}]"
-    lines.append(Line(label, tracks.positions(tracks.est), colour(0)))
+    lines.append(Line(("SLAM: " if slam is not None else "") + label, tracks.positions(tracks.est), colour(0)))
+    if slam is not None:
+        lines += slam.lines(tracks)
     if tracks.keyframes is not None and len(tracks.keyframes):
         lines.append(Line(f"keyframes ({len(tracks.keyframes)})", tracks.positions(tracks.keyframes), colour(3),
                           markers=True))  # fmt: skip
@@ -218,7 +224,8 @@ def _trajectory(page: Page, tracks: _Tracks, m: dict[str, Any], unit: str) -> No
         lambda: (topview_figure(lines, basis, title, unit if tracks.aligned else "units"),
                  f"Top view of {how}, keyframes as diamonds, the start of each line as a circle. The view is the "
                  f"plane of the two principal axes of the {'ground-truth' if tracks.aligned else 'estimated'} "
-                 f"positions (the two directions of largest extent): {axis_basis_text(basis)} (world axes)."),
+                 f"positions (the two directions of largest extent): {axis_basis_text(basis)} (world axes)."
+                 + (slam.caption() if slam is not None else "")),
         "trajectory figure",
     )  # fmt: skip
 
@@ -330,7 +337,10 @@ def run_page(folder: Path, page: Page) -> str:
     _header(page, m, info, unit, has_gt)
     _metrics(page, m, unit, has_gt)
     tracks = _Tracks(folder, m, page)
-    _trajectory(page, tracks, m, unit)
+    slam = SlamTracks(folder, tracks, page) if is_slam_run(folder, m) else None
+    if slam is not None:
+        slam_section(page, m, unit, slam)
+    _trajectory(page, tracks, m, unit, slam)
     _errors(page, tracks, m, unit)
     _depth_pictures(page, folder)
     files = [p.name for p in sorted(folder.iterdir()) if p.is_file() and not p.name.startswith(".")]

@@ -64,8 +64,13 @@ def test_console_script_runs(sample_dir: Path) -> None:
         capture_output=True, text=True, check=True,
     )
     assert json.loads(out.stdout)["frames"] == 300
-    bad = subprocess.run([sys.executable, "-m", "dmtrack.cli", "info"], capture_output=True, text=True)
+    bad = subprocess.run([sys.executable, "-m", "dmtrack.cli", "run"], capture_output=True, text=True)
     assert bad.returncode == 2 and "sequence" in bad.stderr
+    # without a sequence, info describes this machine: versions and whether a GPU is usable (and why not)
+    env = subprocess.run([sys.executable, "-m", "dmtrack", "info", "--json"], capture_output=True, text=True,
+                         check=True)  # fmt: skip
+    gpu = json.loads(env.stdout)["gpu"]
+    assert isinstance(gpu["usable"], bool) and (gpu["usable"] or gpu["reason"])
 
 
 def test_eval_matches_evo_reference(capsys: pytest.CaptureFixture[str], shared_dir: Path) -> None:

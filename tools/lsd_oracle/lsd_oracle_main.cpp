@@ -11,7 +11,9 @@
 // files      a folder (every file in it, sorted, as upstream) or a text file listing one image per line
 // calib      LSD-SLAM calibration file (4 lines; a pinhole is "fx/w fy/h (cx+0.5)/w (cy+0.5)/h 0")
 // out        writes PREFIX.txt (every frame, TUM, camera-to-world, timestamp = frame index), PREFIX_kf.txt
-//            (keyframes) and PREFIX_trace.jsonl (one JSON object per frame, see README.md)
+//            (keyframes) and PREFIX_trace.jsonl (one JSON object per frame, see README.md); with slam=1 the
+//            poses are those after upstream's finalize() (final optimisation) and PREFIX_graph.txt lists the
+//            pose graph's constraints (keyframe pairs, odometry or loop)
 // slam/mt    doSlam and multiThreading (default 0/0: pure VO, single-threaded mapping, deterministic)
 // seed       srand(seed) before the random initialisation (default: not called, i.e. glibc's seed 1)
 // initdepth  replace the random initial inverse depth by this file (H*W float32, row-major; <= 0 or NaN
@@ -463,8 +465,12 @@ int main(int argc, char** argv)
 		for(auto& kv : tracks) trace << kv.second << g_mapping[kv.first] << "}\n";
 	}
 
-	// every frame's pose (keyframes graph-optimised in SLAM mode), and the keyframes
+	// every frame's pose, and the keyframes. In SLAM mode after upstream's finalize() (final constraint search,
+	// final optimisation, result merged by the mapping thread): a keyframe in the graph returns its optimised pose,
+	// every other frame its tracking parent's (optimised) pose composed with its tracked frame->keyframe pose
+	// (FramePoseStruct::getCamToWorld; merging invalidates the cached poses)
 	if(doSlam) system->finalize();
+	boost::shared_lock<boost::shared_mutex> poseLock(system->poseConsistencyMutex);  // no merge while writing
 	std::ofstream traj(a.get("out") + ".txt"), kfs(a.get("out") + "_kf.txt");
 	traj.precision(12);
 	kfs.precision(12);
@@ -483,6 +489,32 @@ int main(int argc, char** argv)
 	}
 	traj.close();
 	kfs.close();
+	if(doSlam)
+	{
+		// the pose graph's constraints: PREFIX_graph.txt, one line per keyframe pair (upstream inserts both
+		// directions of an accepted reciprocal test): frame ids of the two keyframes and whether the pair is a
+		// keyframe and the keyframe it was tracked on (the odometry edge; every other pair is a loop constraint
+		// found by the constraint search)
+		KeyFrameGraph* g = system->keyFrameGraph;
+		std::map<std::pair<int, int>, bool> pairs;
+		for(KFConstraintStruct* e : g->edgesAll)
+		{
+			int i = e->firstFrame->id(), j = e->secondFrame->id();
+			bool odo = (e->firstFrame->hasTrackingParent() && e->firstFrame->getTrackingParent() == e->secondFrame) ||
+			           (e->secondFrame->hasTrackingParent() && e->secondFrame->getTrackingParent() == e->firstFrame);
+			pairs[std::make_pair(std::min(i, j), std::max(i, j))] = odo;
+		}
+		std::ofstream gf(a.get("out") + "_graph.txt");
+		gf << "# keyframe_frame_a keyframe_frame_b odometry (1: a keyframe and its tracking parent, 0: loop)\n";
+		int loops = 0;
+		for(auto& kv : pairs)
+		{
+			gf << kv.first.first << " " << kv.first.second << " " << (kv.second ? 1 : 0) << "\n";
+			loops += kv.second ? 0 : 1;
+		}
+		printf("lsd_oracle: graph: %d keyframes, %d constraints (%d keyframe pairs, %d loop)\n",
+		       (int)g->keyframesAll.size(), (int)g->edgesAll.size(), (int)pairs.size(), loops);
+	}
 	printf("lsd_oracle: %d frames, wrote %s.txt\n", idx, a.get("out").c_str());
 	fflush(stdout);
 	_exit(0);  // skip the destructors: the threads are idle and the outputs are written

@@ -18,3 +18,10 @@ PY=${PYTHON:-.venv/bin/python}
 # every accepted edge of the default run against the ground truth
 "$PY" benchmarks/slam_edges.py "$R/runs/7scenes_gray_geometric_seed0" --json "$R/7scenes_gray_geometric_edges.json" \
   > "$R/7scenes_gray_geometric_edges.txt"
+# LSD-SLAM beside dmtrack (issue 31's anchor): upstream LSD-SLAM through tools/lsd_oracle (build it first with
+# tools/lsd_oracle/build.sh), full system (slam=1, FabMap off) and VO (slam=0), one process at a time, from
+# dmtrack's random initial maps of seeds 0-4, from LSD-SLAM's own srand maps (seeds 1-5: srand(0) is srand(1)), and
+# every seed three more times (LSD-SLAM's threads make runs differ)
+"$PY" benchmarks/lsd_slam_anchor.py "$S" --seeds 0-4 --out "$R" --name lsd_slam_anchor
+"$PY" benchmarks/lsd_slam_anchor.py "$S" --field lsd --seeds 1-5 --out "$R" --name lsd_slam_anchor_srand
+"$PY" benchmarks/lsd_slam_anchor.py "$S" --seeds 0-4 --repeat 3 --out "$R" --name lsd_slam_anchor_repeat

@@ -31,9 +31,6 @@ import numpy as np
 
 from dmtrack.errors import InputError
 
-#: The device specs accepted from users (besides ``cuda:N`` and :class:`torch.device` objects).
-DEVICE_CHOICES = ("auto", "cpu", "cuda")
-
 _SPEC = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 
@@ -200,16 +197,6 @@ def runner_for(spec: Any) -> DeviceRunner | None:
     """The :class:`DeviceRunner` of a device spec, or None for the CPU kernels."""
     dev = resolve_device(spec)
     return None if dev is None else DeviceRunner(dev)
-
-
-def accepts_device(factory: Any) -> bool:
-    """Whether a feature factory (class) takes a ``device`` option."""
-    import inspect
-
-    try:
-        return "device" in inspect.signature(factory).parameters
-    except (TypeError, ValueError):
-        return False
 
 
 class DeviceFeatureMixin:

@@ -7,6 +7,7 @@ with ``requires_shared``) and are skipped with a clear reason when it is absent.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -27,6 +28,31 @@ requires_shared = pytest.mark.skipif(
 def _isolated_user_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
     """The user's calibrated scales / PCA bases (~/.config/dmtrack) must not leak into the tests."""
     os.environ["DMTRACK_HOME"] = str(tmp_path_factory.mktemp("dmtrack-home"))
+
+
+#: environment variables that numba, BLAS, OpenCV or dmtrack read (some only once, at import or compile time)
+_WATCHED_ENV = ("NUMBA_", "DMTRACK_", "OMP_", "OPENBLAS_", "MKL_", "KMP_", "NPY_", "OPENCV_", "PYTHONHASHSEED")
+
+
+def _watched_state() -> dict[str, object]:
+    import numba
+
+    env = {k: v for k, v in os.environ.items() if k.startswith(_WATCHED_ENV)}
+    return {"environment": env, "numba threads": numba.get_num_threads(),
+            "numba config": (numba.config.NUMBA_NUM_THREADS, numba.config.CPU_NAME, numba.config.CPU_FEATURES,
+                             numba.config.DISABLE_JIT, numba.config.THREADING_LAYER)}  # fmt: skip
+
+
+@pytest.fixture(autouse=True)
+def _leaves_the_process_as_it_found_it(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Every test leaves numba's thread count, numba's configuration and the environment variables the kernels read
+    as it found them: a test that changed them would change what the tests after it compile or run (issue 41)."""
+    before = _watched_state()
+    yield
+    after = _watched_state()
+    changed = {k: (before[k], after[k]) for k in before if before[k] != after[k]}
+    if changed:
+        pytest.fail(f"{request.node.nodeid} left the process changed: {changed}", pytrace=False)
 
 
 @pytest.fixture(scope="session")

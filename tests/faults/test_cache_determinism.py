@@ -1,17 +1,20 @@
 """The run that compiles the numba kernels and the runs that load them from numba's cache give the same bytes.
 
-A fast-math loop compiled twice may round differently (see :mod:`dmtrack.odometry._fastmath`): numba keeps a helper
-as its own compiled function and as a copy inside each caller's cached machine code, and the compiling process runs
-the former while a process that loads the cache ran the latter, so multichannel trajectories used to differ between
-the first run of a fresh cache and every later run. Two subprocesses share a fresh ``NUMBA_CACHE_DIR``: the first
-compiles every kernel, the second loads them all; both track the same short synthetic sequence with a 3-channel and
-an 8-channel feature.
+numba keeps a jitted helper as its own compiled function and as a copy inside each caller's cached machine code;
+which copy runs depends on what the cache held when the process started. With fast-math sums the copies rounded
+differently, so multichannel runs differed between the first run of a fresh cache and later ones, and — once — a
+cache that held a kernel but not its helper made ``make test`` fail (issue 41). The sums now have an order fixed by
+the source (:mod:`dmtrack.odometry._lanes`), so every copy gives the same bits. Subprocesses share a fresh
+``NUMBA_CACHE_DIR``: the first compiles every kernel, the second loads them all, the third finds the kernels cached
+but their helpers gone (the state that broke the fast-math design); all track the same short synthetic sequence with
+a 3-channel and an 8-channel feature.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -45,17 +48,31 @@ def _run(out: Path, cache: Path) -> dict[str, int]:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+#: helpers that the kernels call (not inline) and cache on their own: removed from the cache for the third run
+HELPERS = ("_chunk_channel_sums", "_window_cost", "_combine_eval")
+
+
 @pytest.mark.slow  # the first subprocess compiles every kernel: 60-90 s on two cores
 def test_compiling_run_and_cached_run_give_the_same_bytes(tmp_path: Path, fault_log) -> None:
     cache = tmp_path / "numba-cache"
     compiled = _run(tmp_path / "compiled", cache)
+    partial = tmp_path / "partial-cache"
+    shutil.copytree(cache, partial)
     cached = _run(tmp_path / "cached", cache)
     assert compiled["misses"] > 0 and compiled["hits"] == 0, compiled  # really compiled here...
     assert cached["hits"] > 0 and cached["misses"] == 0, cached  # ...and really loaded from the cache there
+    removed = [f for f in partial.rglob("*.nb[ic]") if f.name.split("-")[0].split(".")[-1] in HELPERS]
+    assert {f.name.split("-")[0].split(".")[-1] for f in removed} == set(HELPERS)
+    for f in removed:
+        f.unlink()
+    helpers_gone = _run(tmp_path / "partial", partial)
+    assert helpers_gone["hits"] > 0, helpers_gone  # the kernels came from the cache, without their helpers
     for feature in FEATURES:
         for name in ("trajectory.txt", "keyframes.txt"):
             first = (tmp_path / "compiled" / feature / name).read_bytes()
             assert first.strip(), f"{feature}: empty {name}"
             assert (tmp_path / "cached" / feature / name).read_bytes() == first, f"{feature}: {name} differs"
+            assert (tmp_path / "partial" / feature / name).read_bytes() == first, f"{feature}: {name} differs"
     fault_log.tried("determinism", "rgb, bitplanes: the run that compiles the kernels vs a run from numba's cache",
                     n=len(FEATURES))  # fmt: skip
+    fault_log.tried("determinism", "rgb, bitplanes: kernels cached without their helpers", n=len(FEATURES))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from dmtrack.odometry._fastmath import kernel_target
+from dmtrack.odometry._target import kernel_target
 from dmtrack.pipeline import run_to_directory
 
 SAMPLE = Path(__file__).resolve().parents[2] / "data" / "7scenes-redkitchen-0000-0299"
@@ -67,6 +67,9 @@ def test_kernel_target_follows_numba_cpu_name(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.delenv("NUMBA_CPU_FEATURES", raising=False)
     assert kernel_target()["kernel_target"] == "generic"
     assert kernel_target()["simd"] == "baseline"
+    monkeypatch.setenv("NUMBA_CPU_NAME", "haswell")
+    monkeypatch.setenv("NUMBA_CPU_FEATURES", "")  # the named CPU's own instruction set
+    assert kernel_target() == {**kernel_target(), "kernel_target": "haswell", "simd": "avx2"}
 
 
 _START_DIGEST = """

@@ -138,11 +138,14 @@ def _digest(res: dmtrack.pipeline.RunResult) -> str:
     return h.hexdigest()
 
 
-# sha256 of the poses, timestamps and keyframe poses that commit a4fcd61 (before the geometric start existed)
-# produced for these runs: grey uses scalar arithmetic, byte-identical on every x86-64 CPU and thread count
+# sha256 of the poses, timestamps and keyframe poses of these runs. Commit a4fcd61 (before the geometric start) gave
+# 5cbc420e… / a96f747c… — but only where OpenBLAS ran its Haswell or Zen kernels: the odometry composed its poses with
+# numpy's ``@``, and OpenBLAS's AVX-512 kernels gave 6597d836… for the first (issue 41). Since then the odometry's
+# products are dmtrack.geometry.exact's, and these digests are the same for every numba kernel target and every
+# OpenBLAS kernel (tests/faults/test_kernel_targets.py checks that across targets).
 BEFORE = {
-    "synthetic": "5cbc420e0c3840ff92d9cc722d8e58482bb7f3c70da68b7a60c4293bcfbb915f",
-    "sample": "a96f747c96a18700a69533ef6d4d49c78cc739cf7792f029376f6ebd213d5950",
+    "synthetic": "b6b4c54592f42a0dd8261ecbff9995fa2a6932c93a25370ce4eb53de17c41764",
+    "sample": "cc47871fcae3ba61ee9cd2f09e9fbf2e64c6922c34604d483785e54bbb67ab71",
 }
 
 

@@ -2,8 +2,9 @@
 rebuild (idepth_downsample, make_points): the same bytes as the general kernels, on real feature maps.
 
 Frames 0 and 8 of the demo sequence (real images, real rgb / Bit-Planes features), with an inverse depth on the
-keyframe's high-gradient pixels. The chunked kernel re-compiles the general kernel's fast-math channel loop, so
-bit-identity is a property of the compiled code: these tests compare every output byte for byte.
+keyframe's high-gradient pixels. Both kernels inline one definition of a point's channel sums, whose order the
+source fixes (dmtrack.odometry._lanes); these tests compare every output byte for byte, with each other and with
+the numpy reference of that order.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import pytest
 from dmtrack.geometry.lie import SE3
 from dmtrack.odometry import _tracker_multi
 from dmtrack.odometry._tracker_points import idepth_downsample, make_points, make_points_numpy
-from dmtrack.odometry._tracker_residuals import BUF_COLS, eval_params, eval_pass_parallel
+from dmtrack.odometry._tracker_residuals import BUF_COLS, eval_params, eval_pass_parallel, point_channel_sums_numpy
 from dmtrack.odometry.frame import Frame, build_frame
 from dmtrack.odometry.tracker import TrackingReference
 
@@ -113,6 +114,51 @@ def test_chunked_kernel_is_bit_identical_to_the_general_kernel(
             assert want[0] < ref.level(1).n_points and not want_args[-3].all()
         if T is POSES[2]:
             assert (want_args[-1][:, 2] < 0).any()  # behind the camera, yet projected into the image
+
+
+@pytest.mark.parametrize(
+    "feature,channels,tile",
+    [("bitplanes", None, 1), ("rgb", None, 1), ("bitplanes", slice(0, 2), 1), ("bitplanes", slice(0, 5), 1),
+     ("bitplanes", None, 2), ("rgb", None, 11)],  # fmt: skip
+    ids=["N=8", "N=3", "N=2", "N=5", "N=16", "N=33"],
+)
+def test_the_kernels_give_the_numpy_references_bits(sample_dir: Path, feature: str, channels, tile: int) -> None:  # noqa: ANN001
+    """Every in-image point's buffer row (Sxx, Sxy, Syy, sx, sy) and the error of the general kernel — and so of the
+    chunked ones, compared above — equal :func:`point_channel_sums_numpy` (float32 per channel, the lane order) bit
+    for bit."""
+    kf, fr = _real_pair(sample_dir, feature, channels, tile)
+    ref = _reference(kf)
+    args = _args(ref, fr, 1, POSES[0])
+    points, vals, variances, feat, T, prm, buf = args[0], args[1], args[2], args[4], args[6], args[7], args[-1]
+    got = eval_pass_parallel(*args)
+    fx, fy, cx, cy = (float(prm[k]) for k in range(4))
+    var_weight = float(prm[6])
+    h, w = feat.shape[:2]
+    # the kernel's projection (float64, the same operations)
+    P = points.astype(np.float64)
+    px, py, pz = P[:, 0], P[:, 1], P[:, 2]
+    wx = T[0, 0] * px + T[0, 1] * py + T[0, 2] * pz + T[0, 3]
+    wy = T[1, 0] * px + T[1, 1] * py + T[1, 2] * pz + T[1, 3]
+    wz = T[2, 0] * px + T[2, 1] * py + T[2, 2] * pz + T[2, 3]
+    iz = 1.0 / wz
+    u = (wx * iz) * fx + cx
+    v = (wy * iz) * fy + cy
+    inside = (u > 1.0) & (v > 1.0) & (u < w - 2.0) & (v < h - 2.0)
+    ix, iy = u[inside].astype(np.int64), v[inside].astype(np.int64)
+    dx, dy = u[inside] - ix, v[inside] - iy
+    dxdy = dx * dy
+    zd = pz[inside] * iz[inside] * iz[inside]
+    g0 = (T[0, 3] * wz[inside] - T[2, 3] * wx[inside]) * zd
+    g1 = (T[1, 3] * wz[inside] - T[2, 3] * wy[inside]) * zd
+    s2 = var_weight * variances[inside].astype(np.float64)
+    bilinear = (1.0 - dx - dy + dxdy, dy - dxdy, dx - dxdy, dxdy)
+    sums = point_channel_sums_numpy(feat, ix, iy, vals[inside], bilinear, g0, g1, s2, prm)
+    assert inside.sum() > 1000 and got[0] == inside.sum()
+    assert sums[:, 1:6].tobytes() == np.ascontiguousarray(buf[inside, 3:BUF_COLS]).tobytes()
+    # the error: per-point sums added in point order within each block, blocks in order
+    blocks = np.nonzero(inside)[0] // 1024
+    err = sum(sum(sums[blocks == b, 0].tolist()) for b in np.unique(blocks))
+    assert got[1] == err
 
 
 def test_chunked_kernel_with_affine_sums_runs_the_general_kernel(sample_dir: Path) -> None:

@@ -22,6 +22,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
+from dmtrack.geometry import exact
 from dmtrack.initialization.twoview import bearings
 
 __all__ = ["BundleResult", "bundle_adjust"]
@@ -298,7 +299,7 @@ def _adjust_schur(
             S = Hbig + lam * np.diag(np.diag(Hbig)) - np.einsum("na,nb->ab", W, Hcp)
             g = bc - np.einsum("na,n->a", W, bp)
             try:
-                dc = np.linalg.solve(S + 1e-12 * np.eye(6 * k), g)
+                dc = exact.solve(S + 1e-12 * np.eye(6 * k), g)  # not LAPACK: the same bits on every CPU
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue

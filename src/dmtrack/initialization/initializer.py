@@ -35,6 +35,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from dmtrack.errors import InputError
+from dmtrack.geometry import exact
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.initialization.bundle import bundle_adjust
 from dmtrack.initialization.first_map import grey_frame, make_first_map
@@ -269,7 +270,7 @@ def _window(k: int, n: int, also: int | None = None) -> list[int]:
 def _disagreement(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """Rotation angle between two poses of one frame and the angle between their directions of motion, degrees
     (the scale of two windows differs)."""
-    rot = float(np.degrees(Rotation.from_matrix(a[:3, :3] @ b[:3, :3].T).magnitude()))
+    rot = float(np.degrees(Rotation.from_matrix(exact.matmul(a[:3, :3], b[:3, :3].T)).magnitude()))
     ta, tb = a[:3, 3], b[:3, 3]
-    c = float(ta @ tb) / max(float(np.linalg.norm(ta) * np.linalg.norm(tb)), 1e-300)
+    c = exact.dot(ta, tb) / max(exact.norm(ta) * exact.norm(tb), 1e-300)
     return rot, float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))

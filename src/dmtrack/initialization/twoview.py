@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from dmtrack.geometry import exact
+
 __all__ = ["TwoView", "bearings", "ray_parallax_deg", "two_view"]
 
 HOMOGRAPHY_PX = 2.0
@@ -74,7 +76,7 @@ def two_view(
     inl = np.flatnonzero(pose_mask[:, 0] > 0)
     if len(inl) < min_points:
         return None
-    t = t.ravel() / max(float(np.linalg.norm(t)), 1e-300)
+    t = t.ravel() / max(exact.norm(t.ravel()), 1e-300)
     idepth = triangulate_idepth(a[inl], b[inl], K, R, t)
     par = ray_parallax_deg(a[inl], idepth, K, R, t)
     H, hmask = cv2.findHomography(a[inl], b[inl], cv2.RANSAC, HOMOGRAPHY_PX)
@@ -102,8 +104,8 @@ def bearings(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
 def triangulate_idepth(a: np.ndarray, b: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Inverse depths in the first camera of points seen at ``a`` and ``b`` (DLT, ``cv2.triangulatePoints``); NaN
     for points at infinity or behind the first camera."""
-    P0 = K @ np.hstack([np.eye(3), np.zeros((3, 1))])
-    P1 = K @ np.hstack([R, t.reshape(3, 1)])
+    P0 = exact.matmul(K, np.hstack([np.eye(3), np.zeros((3, 1))]))
+    P1 = exact.matmul(K, np.hstack([R, t.reshape(3, 1)]))
     X = cv2.triangulatePoints(P0, P1, np.ascontiguousarray(a.T, np.float64), np.ascontiguousarray(b.T, np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
         idepth = X[3] / X[2]  # 1 / z of (X/W)

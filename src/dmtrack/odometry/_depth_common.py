@@ -56,7 +56,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-from dmtrack.odometry._fastmath import FASTMATH
+from dmtrack.geometry.exact import matmul
 from dmtrack.odometry.config import UPDATE_VARIANCE_MODES
 
 # ------------------------------------------------------------------------------------------ constants
@@ -215,11 +215,11 @@ def stereo_geometry(
     g = np.zeros(N_GEO, np.float64)
     g[G_FX], g[G_FY], g[G_CX], g[G_CY] = fx, fy, cx, cy
     g[G_FXI], g[G_FYI], g[G_CXI], g[G_CYI] = 1.0 / fx, 1.0 / fy, -cx / fx, -cy / fy
-    g[G_KR : G_KR + 9] = (K @ R).ravel()
-    g[G_KT : G_KT + 3] = K @ t
+    g[G_KR : G_KR + 9] = matmul(K, R).ravel()
+    g[G_KT : G_KT + 3] = matmul(K, t)
     g[G_T : G_T + 3] = t
     g[G_R : G_R + 9] = R.ravel()
-    g[G_TINV : G_TINV + 3] = -R.T @ t
+    g[G_TINV : G_TINV + 3] = -matmul(R.T, t)
     g[G_TRACK_FAC] = 0.25 * (1.0 + float(initial_tracked_residual))
     return g
 
@@ -272,10 +272,10 @@ _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 # small helpers are inlined at numba-IR level: LLVM does not inline across separately compiled (cached)
 # numba functions, and a call per bilinear sample costs ~3x the sample itself
 _JIT_INLINE = {**_JIT, "inline": "always"}
-# the multichannel loops of the stereo search (see dmtrack.odometry._fastmath); ``forceinline`` and ``_nrt`` are set
-# explicitly so that a caller compiled with _JIT_LLVM_INLINE never passes its own on to them (numba inherits unset
-# flags from the function being compiled): they stay separately compiled calls, as the fast-math rule requires
-_JIT_FAST = {**_JIT, "fastmath": set(FASTMATH), "forceinline": False, "_nrt": True}
+# the multichannel loops of the stereo search, with their sums in fixed lanes (see dmtrack.odometry._lanes): separately
+# compiled calls; ``forceinline`` and ``_nrt`` are set explicitly so that a caller compiled with _JIT_LLVM_INLINE never
+# passes its own on to them (numba inherits unset flags from the function being compiled)
+_JIT_LANES = {**_JIT, "forceinline": False, "_nrt": True}
 # helpers that take arrays and run per pixel or per search step (the line stereo and its samples): inlined by LLVM
 # (``alwaysinline``) into the kernel that calls them rather than at numba-IR level, and compiled without reference
 # counting (``_nrt=False``; they allocate nothing): an IR-inlined array argument becomes an alias whose reference

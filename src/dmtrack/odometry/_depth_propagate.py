@@ -11,6 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from dmtrack.geometry.exact import matmul
 from dmtrack.odometry._depth_common import (
     _JIT,
     GOOD_LEVEL,
@@ -226,7 +227,7 @@ def propagate_reference(
     ys, xs = np.nonzero(valid_o)  # row-major order
     d = idepth_s_o[ys, xs].astype(np.float64)
     rays = np.stack([(xs - cx) / fx, (ys - cy) / fy, np.ones(len(xs))])
-    pn = (T[:3, :3] @ rays) / d + T[:3, 3:4]
+    pn = matmul(T[:3, :3], rays) / d + T[:3, 3:4]
     nid = 1.0 / pn[2]
     un = pn[0] * nid * fx + cx
     vn = pn[1] * nid * fy + cy

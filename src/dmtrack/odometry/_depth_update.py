@@ -50,7 +50,13 @@ from dmtrack.odometry._depth_common import (
     _unzero,
     run_rows,
 )
-from dmtrack.odometry._epipolar_stereo import _epl_check, _line_stereo, epl_check_reference, line_stereo_reference
+from dmtrack.odometry._epipolar_stereo import (
+    _epl_check,
+    _line_stereo,
+    epl_check_reference,
+    line_stereo_reference,
+    padded_channels,
+)
 from dmtrack.odometry.frame import gradients
 
 #: ``kf_gx`` / ``kf_gy`` of the observe kernel when it forms the keyframe pixels' gradients itself (N > 1).
@@ -101,8 +107,8 @@ def _observe_rows(
     min_grad = prm[P_MIN_GRAD]
     max_var = prm[P_MAX_VAR]
     max_depth_id = 1.0 / prm[P_MIN_DEPTH]
-    kfv = np.empty((5, nch), np.float64)
-    ring = np.empty((6, nch), np.float64)
+    kfv = np.zeros((5, padded_channels(nch)), np.float64)  # zero padding: see _epipolar_stereo._window_cost
+    ring = np.zeros((6, padded_channels(nch)), np.float64)
     st = np.empty((6, 7), np.float64)
     # N > 1 without gradient maps (kf_gx.ndim == 1, see observe_numba): the keyframe pixel's own gradients, formed
     # here per pixel with the float32 arithmetic of frame.gradients (the same bits as reading the maps)
@@ -276,8 +282,7 @@ def observe_numba(
     counts = np.zeros((h, N_COUNTS), np.int64)
     use_good = good is not None
     g = good if use_good else np.ones((1, 1), np.bool_)
-    # one compiled row kernel for any thread count: serial and threaded updates run the same machine code (the
-    # fast-math channel loops it calls could otherwise be vectorised with different reduction orders in two builds)
+    # one compiled row kernel for any thread count: serial and threaded updates run the same machine code
     args = (*state, kf, kf_gx, kf_gy, kf_mg, ref, g, use_good, geo, prm, float(cscale), int(frame_id),
             float(skip_ratio), counts)  # fmt: skip
     run_rows(_observe_rows, args, parallel)

@@ -18,7 +18,8 @@ import numpy as np
 
 from dmtrack.odometry._depth_common import (
     _JIT,
-    _JIT_FAST,
+    _JIT_INLINE,
+    _JIT_LANES,
     _JIT_LLVM_INLINE,
     G_CX,
     G_CXI,
@@ -46,12 +47,11 @@ from dmtrack.odometry._depth_common import (
     P_MIN_EPL_LEN2,
     P_PIX_NOISE2,
     P_SUBPIXEL,
-    _bilinear,
     _sample,
     _sample1,
     bilinear_reference,
 )
-from dmtrack.odometry._fastmath import pin_cached
+from dmtrack.odometry._lanes import LANES64, lane_dots4, lane_window4, scratch_f64
 
 # ------------------------------------------------------------------------------------------ constants
 #: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
@@ -65,9 +65,7 @@ DIVISION_EPS = 1e-10
 def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
     """(Σ_c ((2 gx_c, 2 gy_c)·ep)², Σ_c |2 ∇F_c|²) of one keyframe pixel (N > 1), in channel order.
 
-    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the observe kernel, where a
-    re-associated sum would round differently in the run that compiles the kernel and in the runs that load it from
-    numba's cache (see :mod:`dmtrack.odometry._fastmath`).
+    Plain IEEE arithmetic in channel order, like every sum in the odometry (see :mod:`dmtrack.odometry._lanes`).
     """
     dot2 = 0.0
     g2 = 0.0
@@ -86,68 +84,82 @@ def _epl_sums(gxs, gys, epx, epy):  # pragma: no cover - compiled
 DOT_MIN_CHANNELS = 24
 
 
-@numba.njit(**_JIT_FAST)
+_ACC2 = 2 * LANES64  # scratch sizes (compile-time constants): two, five and seven float64 sums in lanes
+_ACC5 = 5 * LANES64
+_ACC7 = 7 * LANES64
+
+
+@numba.njit(**_JIT_INLINE)
+def _fold4(acc, k):  # pragma: no cover - compiled
+    """``(a0 + a1) + (a2 + a3)`` of the four lanes of sum ``k`` in the scratch array ``acc``."""
+    o = k * LANES64
+    return (acc[o] + acc[o + 1]) + (acc[o + 2] + acc[o + 3])
+
+
+@numba.njit(**_JIT_INLINE)
+def _padded(n):  # pragma: no cover - compiled
+    """``n``, the columns of a stereo scratch row, which must be a multiple of the lanes (see :func:`_window_cost`)."""
+    if n % LANES64 != 0:
+        raise ValueError("the stereo search's scratch rows must be zero-padded to a multiple of LANES64 columns")
+    return n
+
+
+@numba.njit(**_JIT)
+def padded_channels(n):  # pragma: no cover - compiled
+    """``n`` rounded up to a multiple of :data:`~dmtrack.odometry._lanes.LANES64`: the columns of the stereo search's
+    float64 scratch rows (the padding stays zero)."""
+    return (n + LANES64 - 1) // LANES64 * LANES64
+
+
+@numba.njit(**_JIT_LANES)
 def _window_cost(ring, kfv, loop):  # pragma: no cover - compiled
     """Σ_j ‖s_{L−j} − k_j‖² and Σ_j ⟨s_{L−j} − k_j, s_{L−j−1} − k_j⟩ at step L = ``loop`` directly (N > 1, few
-    channels); ``ring`` row t mod 6 holds the sample s_t (see :func:`_line_stereo`). Reads only."""
-    nch = ring.shape[1]
-    ee = 0.0
-    cross = 0.0
+    channels); ``ring`` row t mod 6 holds the sample s_t (see :func:`_line_stereo`). Reads only.
+
+    ``ring`` (6, N') and ``kfv`` (5, N') are padded with zero columns to N' = a multiple of
+    :data:`~dmtrack.odometry._lanes.LANES64` (a padded channel adds +0.0, which changes no sum). Each sum in four
+    lanes (lane l: the channels c ≡ l mod 4, for j = 0 … 4 in turn; :func:`~dmtrack.odometry._lanes.lane_window4`),
+    folded ``(a0 + a1) + (a2 + a3)``: an order fixed by the source (see :mod:`dmtrack.odometry._lanes`).
+    """
+    acc = scratch_f64(_ACC2)
+    for k in range(_ACC2):
+        acc[k] = 0.0
+    n = _padded(ring.shape[1])
     for j in range(5):
-        r = (loop + 6 - j) % 6
-        rp = (loop + 5 - j) % 6
-        for c in range(nch):
-            k = kfv[j, c]
-            e = ring[r, c] - k
-            ee += e * e
-            cross += e * (ring[rp, c] - k)
-    return ee, cross
+        lane_window4(acc, ring[(loop + 6 - j) % 6], ring[(loop + 5 - j) % 6], kfv[j], n)
+    return (acc[0] + acc[1]) + (acc[2] + acc[3]), (acc[4] + acc[5]) + (acc[6] + acc[7])
 
 
-@numba.njit(**_JIT_FAST)
+@numba.njit(**_JIT_LANES)
 def _kf_norms(kfv):  # pragma: no cover - compiled
-    """Squared norms of the five keyframe samples (rows of ``kfv``, N > 1)."""
-    n0 = n1 = n2 = n3 = n4 = 0.0
-    for c in range(kfv.shape[1]):
-        n0 += kfv[0, c] * kfv[0, c]
-        n1 += kfv[1, c] * kfv[1, c]
-        n2 += kfv[2, c] * kfv[2, c]
-        n3 += kfv[3, c] * kfv[3, c]
-        n4 += kfv[4, c] * kfv[4, c]
-    return n0, n1, n2, n3, n4
+    """Squared norms of the five keyframe samples (rows of ``kfv``, (5, N') zero-padded, N > 1), each in four lanes
+    (see :func:`_window_cost`)."""
+    acc = scratch_f64(_ACC5)
+    for k in range(_ACC5):
+        acc[k] = 0.0
+    rows = (kfv[0], kfv[1], kfv[2], kfv[3], kfv[4])
+    lane_dots4(acc, rows, rows, _padded(kfv.shape[1]))
+    return (_fold4(acc, 0), _fold4(acc, 1), _fold4(acc, 2), _fold4(acc, 3), _fold4(acc, 4))
 
 
-@numba.njit(**_JIT_FAST)
+@numba.njit(**_JIT_LANES)
 def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - compiled
     """Bilinear sample s of all channels at (x, y) into ``ring[row]`` and its statistics into ``st[row]``:
-    (‖s‖², ⟨s, k_0⟩ … ⟨s, k_4⟩, ⟨s, ring[prow]⟩) with k_j the keyframe samples (N > 1).
+    (‖s‖², ⟨s, k_0⟩ … ⟨s, k_4⟩, ⟨s, ring[prow]⟩) with k_j the keyframe samples (N > 1; ``ring`` and ``kfv``
+    zero-padded as in :func:`_window_cost`), each in four lanes (:func:`~dmtrack.odometry._lanes.lane_dots4`).
 
     With them every 5-sample SSD of the search and its cross term with the previous step are sums of
     scalars (see :func:`_line_stereo`): one pass over the N channels per search step instead of five.
     """
-    ix, iy, w00, w01, w10, w11 = _bilinear(x, y)
-    nrm = d0 = d1 = d2 = d3 = d4 = ss = 0.0
-    for c in range(img.shape[2]):
-        v = w11 * img[iy + 1, ix + 1, c] + w01 * img[iy + 1, ix, c] + w10 * img[iy, ix + 1, c] + w00 * img[iy, ix, c]
-        ring[row, c] = v
-        nrm += v * v
-        d0 += v * kfv[0, c]
-        d1 += v * kfv[1, c]
-        d2 += v * kfv[2, c]
-        d3 += v * kfv[3, c]
-        d4 += v * kfv[4, c]
-        ss += v * ring[prow, c]
-    st[row, 0] = nrm
-    st[row, 1] = d0
-    st[row, 2] = d1
-    st[row, 3] = d2
-    st[row, 4] = d3
-    st[row, 5] = d4
-    st[row, 6] = ss
-
-
-# the fast-math loops called (not inlined) by the line stereo: one compiled copy for every process
-pin_cached(_window_cost, _kf_norms, _sample_stats)
+    _sample(img, x, y, ring, row)
+    acc = scratch_f64(_ACC7)
+    for k in range(_ACC7):
+        acc[k] = 0.0
+    s = ring[row]
+    lane_dots4(acc, (s, s, s, s, s, s, s), (s, kfv[0], kfv[1], kfv[2], kfv[3], kfv[4], ring[prow]),
+               _padded(ring.shape[1]))  # fmt: skip
+    for k in range(7):
+        st[row, k] = _fold4(acc, k)
 
 
 @numba.njit(**_JIT_LLVM_INLINE)
@@ -553,8 +565,8 @@ def line_stereo_numba(
         nch = 1
     else:
         nch = kf.shape[2]
-    kfv = np.empty((5, nch), np.float64)
-    ring = np.empty((6, nch), np.float64)
+    kfv = np.zeros((5, padded_channels(nch)), np.float64)  # zero padding: see _window_cost
+    ring = np.zeros((6, padded_channels(nch)), np.float64)
     st = np.empty((6, 7), np.float64)
     return _line_stereo(
         kf, ref, kf_gx, kf_gy, u, v, epxn, epyn, min_idepth, prior_idepth, max_idepth, geo, prm, cscale, kfv, ring, st

@@ -1,25 +1,21 @@
 """Chunked residual pass of the SE(3) tracker for N > 1 channels (the tracker's kernel for 1 < N ≤ 32).
 
 The same evaluation as the general kernel :func:`dmtrack.odometry._tracker_residuals.eval_pass_parallel` (whose
-N > 1 branch calls :func:`~dmtrack.odometry._tracker_residuals._channel_sums` point by point), in passes over
-chunks of :data:`~dmtrack.odometry._tracker_residuals.CHUNK` points per block:
+N > 1 branch forms each point's channel sums with
+:func:`~dmtrack.odometry._tracker_residuals.point_channel_sums`), in passes over chunks of
+:data:`~dmtrack.odometry._tracker_residuals.CHUNK` points per block:
 
 (A) pose, projection, image test, bilinear weights, depth-derivative terms and pixel offsets of the chunk,
     vectorised over points (IEEE float64, the general kernel's operations; outside points are computed on pixel
     (2, 2) and skipped later);
-(B) :func:`_chunk_channel_sums`: for every in-image point of the chunk the body of ``_channel_sums`` (the same
-    float32 channel loop, the same float64 prologue and epilogue), on a flat view of the feature map with
-    unsigned offsets — no per-point call, and none of the negative-index handling of ``feat[iy - 1, ix - 1, c]``;
+(B) :func:`_chunk_channel_sums`: ``point_channel_sums`` for every in-image point of the chunk, on a flat view of
+    the feature map with unsigned offsets — no per-point call, and none of the negative-index handling;
 (C) the sums over points (error, good/bad, usage) in point order, the flags and the buffer rows.
 
-Bit-identical to the general kernel: (A) and (C) are IEEE arithmetic in the same order, and (B) is a fast-math
-loop whose source per point is ``_channel_sums``'s. Fast-math lets LLVM choose the order of the channel sums
-*per compilation* (see :mod:`dmtrack.odometry._fastmath`), so that this second compilation of the loop gives the
-bytes of the first is a property of the compiler, not of the source: ``tests/odometry/test_tracker_multi.py``
-compares the two kernels byte for byte on real feature maps (N = 3, 8, 16, 32 and odd N), and the trajectory
-hashes of the multichannel features are the end-to-end check. Like every fast-math loop here, (B) lives in one
-helper that is never inlined and is pinned (:func:`~dmtrack.odometry._fastmath.pin_cached`), so the compiling
-run and the cached runs execute the same machine code.
+Bit-identical to the general kernel by construction: (A) and (C) are IEEE arithmetic in the same order, and (B)
+inlines the same function, whose channel sums have an order fixed by the source (the lanes of
+:mod:`dmtrack.odometry._lanes`, no fast-math), so no compilation, cached copy or CPU can round them differently.
+``tests/odometry/test_tracker_multi.py`` compares the two kernels and the numpy reference byte for byte.
 
 The tracker takes its kernels from :func:`tracker_eval_kernels`. For N > 32 the general kernel is as fast or faster
 (the channel loop dominates and the chunk's extra passes do not pay), so it keeps that one (:data:`MAX_CHANNELS`).
@@ -27,12 +23,10 @@ The tracker takes its kernels from :func:`tracker_eval_kernels`. For N > 32 the 
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
-from dmtrack.odometry._fastmath import FASTMATH, pin_cached
+from dmtrack.odometry._lanes import ACC32, scratch_f32, scratch_f64, select
 from dmtrack.odometry._tracker_residuals import (
     _NE,
     BLOCK,
@@ -53,8 +47,7 @@ from dmtrack.odometry._tracker_residuals import (
     _eval_multi,
     eval_kernels,
     eval_pass_parallel,
-    scratch_f64,
-    select,
+    point_channel_sums,
 )
 
 #: Largest channel count the chunked kernel is used for (above it the general kernel is as fast or faster).
@@ -64,88 +57,29 @@ MAX_CHANNELS = 32
 _G_W00, _G_W01, _G_W10, _G_W11, _G_G0, _G_G1, _G_S2 = range(7)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=set(FASTMATH))
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _chunk_channel_sums(
     ff, row, nchu, ref_vals, c0, m, pix, geo, aff_a, aff_b, fx, fy, noise2, huber_half, huber2, out
 ):  # pragma: no cover - compiled
-    """``_channel_sums`` for the in-image points of a chunk (``pix[1, j] != 0``) into ``out[:, j]``.
+    """:func:`~dmtrack.odometry._tracker_residuals.point_channel_sums` for the in-image points of a chunk
+    (``pix[1, j] != 0``) into ``out[:, j]``.
 
     ``ff`` is the flat (h·w·N) feature map, ``pix[0, j]`` the offset of the point's pixel (ix, iy) in it, ``row``
-    = w·N and ``nchu`` = N (unsigned, so that the neighbours' offsets need no negative-index handling), ``geo`` the
-    rows ``_G_*`` of the chunk. The body per point is :func:`~dmtrack.odometry._tracker_residuals._channel_sums`'s
-    (keep the two in step); ``out`` rows: Σ W r², Sxx, Sxy, Syy, sx, sy, Σ r², Σ |∇F|².
+    = w·N and ``nchu`` = N, ``geo`` the rows ``_G_*`` of the chunk; ``out`` rows: Σ W r², Sxx, Sxy, Syy, sx, sy,
+    Σ r², Σ |∇F|².
     """
+    acc = scratch_f32(ACC32)
+    res = scratch_f32(8)
     for j in range(m):
         if pix[1, j] == 0:
             continue
-        o = np.uint64(pix[0, j])
-        w00 = geo[_G_W00, j]
-        w01 = geo[_G_W01, j]
-        w10 = geo[_G_W10, j]
-        w11 = geo[_G_W11, j]
-        g0 = geo[_G_G0, j]
-        g1 = geo[_G_G1, j]
-        s2 = geo[_G_S2, j]
-        ref_row = ref_vals[c0 + j]
-        f00 = np.float32(w00)
-        f01 = np.float32(w01)
-        f10 = np.float32(w10)
-        f11 = np.float32(w11)
-        fa = np.float32(aff_a)
-        fb = np.float32(aff_b)
-        rs = math.sqrt(s2) if s2 > 0.0 else 0.0
-        kx = np.float32(0.5 * rs * fx * g0)
-        ky = np.float32(0.5 * rs * fy * g1)
-        one = np.float32(1.0)
-        fn2 = np.float32(noise2)
-        fhh = np.float32(huber_half)
-        fh2 = np.float32(huber2)
-        err = np.float32(0.0)
-        sxx = np.float32(0.0)
-        sxy = np.float32(0.0)
-        syy = np.float32(0.0)
-        bx = np.float32(0.0)
-        by = np.float32(0.0)
-        r2sum = np.float32(0.0)
-        g2sum = np.float32(0.0)
-        for c in range(np.uint64(0), nchu):
-            # corners A = (ix, iy), B = (ix+1, iy), C = (ix, iy+1), D = (ix+1, iy+1); 2·gradient = central difference
-            pa = ff[o + c]
-            pb = ff[o + nchu + c]
-            pc = ff[o + row + c]
-            pd = ff[o + row + nchu + c]
-            r = fa * ref_row[c] + fb - (f11 * pd + f01 * pc + f10 * pb + f00 * pa)
-            gx = (f11 * (ff[o + row + nchu + nchu + c] - pc) + f01 * (pd - ff[o + row - nchu + c])
-                  + f10 * (ff[o + nchu + nchu + c] - pa) + f00 * (pb - ff[o - nchu + c]))  # fmt: skip
-            gy = (f11 * (ff[o + row + row + nchu + c] - pb) + f01 * (ff[o + row + row + c] - pa)
-                  + f10 * (pd - ff[o - row + nchu + c]) + f00 * (pc - ff[o - row + c]))  # fmt: skip
-            r2 = r * r
-            d = kx * gx + ky * gy
-            wp = one / (fn2 + d * d)
-            e2 = r2 * wp
-            ww = wp if e2 < fh2 else wp * fhh / np.sqrt(e2)
-            r2sum += r2
-            g2sum += gx * gx + gy * gy
-            err += ww * r2
-            wgx = ww * gx
-            wgy = ww * gy
-            sxx += wgx * gx
-            sxy += wgx * gy
-            syy += wgy * gy
-            bx += wgx * r
-            by += wgy * r
-        out[0, j] = np.float64(err)
-        out[1, j] = 0.25 * fx * fx * np.float64(sxx)
-        out[2, j] = 0.25 * fx * fy * np.float64(sxy)
-        out[3, j] = 0.25 * fy * fy * np.float64(syy)
-        out[4, j] = 0.5 * fx * np.float64(bx)
-        out[5, j] = 0.5 * fy * np.float64(by)
-        out[6, j] = np.float64(r2sum)
-        out[7, j] = 0.25 * np.float64(g2sum)
-
-
-# the kernel calls this fast-math loop (not inlined): one compiled copy for every process, see _fastmath
-pin_cached(_chunk_channel_sums)
+        sums = point_channel_sums(
+            ff, np.uint64(pix[0, j]), row, nchu, ref_vals[c0 + j], geo[_G_W00, j], geo[_G_W01, j], geo[_G_W10, j],
+            geo[_G_W11, j], geo[_G_G0, j], geo[_G_G1, j], geo[_G_S2, j], aff_a, aff_b, fx, fy, noise2, huber_half,
+            huber2, acc, res,
+        )  # fmt: skip
+        for k in range(8):
+            out[k, j] = sums[k]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")

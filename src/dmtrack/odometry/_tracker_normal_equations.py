@@ -23,7 +23,8 @@ import math
 import numba
 import numpy as np
 
-from dmtrack.odometry._tracker_residuals import BLOCK, scratch_f64, select
+from dmtrack.odometry._lanes import scratch_f64, select
+from dmtrack.odometry._tracker_residuals import BLOCK
 
 # ============================================================================== normal equations
 _NA = 27  # 21 upper-triangle entries of A and 6 of b

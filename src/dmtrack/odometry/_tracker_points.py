@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from dmtrack.odometry._tracker_residuals import select
+from dmtrack.odometry._lanes import select
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")

@@ -19,6 +19,11 @@ are computed too (on a clamped pixel) and masked with :func:`select`; a masked p
 which leaves them unchanged (they start at +0.0 and never become −0.0), so every result is bit-identical to
 the point-by-point loop of :func:`_eval_block`. The chunk's intermediate rows live on the stack
 (:func:`scratch_f64`), one small array per row, which tells LLVM that they cannot alias the input arrays.
+
+N > 1: a point's channel sums are :func:`point_channel_sums`, float32 in the fixed lane order of
+:mod:`dmtrack.odometry._lanes` (no fast-math anywhere): every kernel that inlines it — this module's general kernel
+and the tracker's chunked kernel (:mod:`dmtrack.odometry._tracker_multi`) — gives the same bits, whichever process
+compiled it, for any thread count and on every CPU; :func:`point_channel_sums_numpy` is its bit-exact reference.
 """
 
 from __future__ import annotations
@@ -27,11 +32,8 @@ import math
 
 import numba
 import numpy as np
-from numba.core import types
-from numba.core.errors import TypingError
-from numba.extending import intrinsic
 
-from dmtrack.odometry._fastmath import FASTMATH, pin_cached
+from dmtrack.odometry._lanes import ACC32, LANES32, fold8x8, scratch_f32, scratch_f64, scratch_i64, select
 
 #: Columns of the per-point buffer written by :func:`eval_pass`: x', y', z' (point in the frame's camera),
 #: Sxx, Sxy, Syy (Σ_c W g gᵀ), sx, sy (Σ_c W r g); all zero for points outside the image.
@@ -53,51 +55,6 @@ _NE = 10
 CHUNK = 128
 
 
-# ============================================================================== vectorisation helpers
-@intrinsic
-def select(typingctx, cond, a, b):  # pragma: no cover - compiled
-    """``a if cond else b`` without a branch (an LLVM ``select``; both sides are computed, IEEE results).
-
-    numba lowers a conditional expression to branches, which keep LLVM from vectorising a loop; a select does
-    not. Both values must have the same numeric type.
-    """
-    if not isinstance(cond, types.Boolean) or a != b:
-        raise TypingError(f"select(bool, x, y) needs x and y of one type, got {cond}, {a}, {b}")
-    sig = a(cond, a, b)
-
-    def codegen(context, builder, signature, args):
-        return builder.select(args[0], args[1], args[2])
-
-    return sig, codegen
-
-
-def _scratch(dtype: types.Type):  # type: ignore[no-untyped-def]
-    @intrinsic
-    def scratch(typingctx, size):  # pragma: no cover - compiled
-        if not isinstance(size, types.IntegerLiteral):
-            raise TypingError("scratch arrays need a compile-time constant size (a module-level int)")
-        n = size.literal_value
-
-        def codegen(context, builder, signature, args):
-            with builder.goto_entry_block():
-                ptr = builder.alloca(context.get_value_type(dtype), size=context.get_constant(types.intp, n))
-                ptr.align = 64
-            return ptr
-
-        return types.CPointer(dtype)(size), codegen
-
-    return scratch
-
-
-#: ``scratch_f64(N)`` / ``scratch_i64(N)``: a stack array of N (a module-level constant) float64 / int64, as a
-#: raw pointer indexed ``p[j]``, valid until the calling function returns. LLVM knows that a stack array that
-#: never escapes cannot alias any argument, so loops that store into it and read (e.g. gather from) input arrays
-#: need no run-time overlap checks and vectorise. Keep one array per quantity: LLVM stops tracking a pointer
-#: after a limited number of uses and then assumes it may alias everything.
-scratch_f64 = _scratch(types.float64)
-scratch_i64 = _scratch(types.int64)
-
-
 def eval_params(
     fx: float,
     fy: float,
@@ -116,22 +73,47 @@ def eval_params(
     return np.array([fx, fy, cx, cy, aff_a, aff_b, var_weight, noise2, huber_half, good_c, good_g, aff_thr], np.float64)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=set(FASTMATH))
-def _channel_sums(
-    feat, iy, ix, w00, w01, w10, w11, ref_row, aff_a, aff_b, fx, fy, g0, g1, noise2, s2, huber_half, huber2
-):  # pragma: no cover - compiled
-    """Per-point channel loop of :func:`_eval_block` for N > 1 (no affine sums), vectorised over channels.
+@numba.njit(nogil=True, error_model="numpy", inline="always")
+def _channel_terms(ff, o, row, nchu, rv, c, f00, f01, f10, f11, fa, fb, kx, ky, fn2, fhh, fh2):  # pragma: no cover
+    """The eight float32 terms of channel ``c`` of one point (see :func:`point_channel_sums`)."""
+    # corners A = (ix, iy), B = (ix+1, iy), C = (ix, iy+1), D = (ix+1, iy+1); 2·gradient = central difference
+    pa = ff[o + c]
+    pb = ff[o + nchu + c]
+    pc = ff[o + row + c]
+    pd = ff[o + row + nchu + c]
+    r = fa * rv[c] + fb - (f11 * pd + f01 * pc + f10 * pb + f00 * pa)
+    gx = (f11 * (ff[o + row + nchu + nchu + c] - pc) + f01 * (pd - ff[o + row - nchu + c])
+          + f10 * (ff[o + nchu + nchu + c] - pa) + f00 * (pb - ff[o - nchu + c]))  # fmt: skip
+    gy = (f11 * (ff[o + row + row + nchu + c] - pb) + f01 * (ff[o + row + row + c] - pa)
+          + f10 * (pd - ff[o - row + nchu + c]) + f00 * (pc - ff[o - row + c]))  # fmt: skip
+    r2 = r * r
+    d = kx * gx + ky * gy
+    wp = np.float32(1.0) / (fn2 + d * d)
+    e2 = r2 * wp
+    ww = select(e2 < fh2, wp, wp * fhh / np.sqrt(e2))
+    wgx = ww * gx
+    wgy = ww * gy
+    return ww * r2, wgx * gx, wgx * gy, wgy * gy, wgx * r, wgy * r, r2, gx * gx + gy * gy
 
-    Reads the (h, w, N) feature map itself, not the packed (F, gx, gy) map: the central differences at the four
-    corners are formed on the fly from the 12 surrounding pixels (all inside the image, since 1 < u < w−2 and
-    1 < v < h−2), which reads a third of the memory of the packed layout and needs no packing pass — for big N
-    the tracker is bound by memory traffic. The constant factors (½ of the central differences, fx, fy, the
-    depth variance) are folded into two coefficients or applied once after the loop, which keeps the loop in
-    the 16 AVX2 registers. float32 arithmetic (8 lanes, the storage precision of the maps); the caller
-    accumulates the per-point sums over points in float64. Returns
-    (Σ W r², Sxx, Sxy, Syy, sx, sy, Σ r², Σ |∇F|²).
+
+@numba.njit(nogil=True, error_model="numpy", inline="always")
+def point_channel_sums(
+    ff, o, row, nchu, rv, w00, w01, w10, w11, g0, g1, s2, aff_a, aff_b, fx, fy, noise2, huber_half, huber2, acc, res
+):  # pragma: no cover - compiled
+    """The channel sums of one in-image point (N > 1, no affine sums), in the fixed lane order of
+    :mod:`dmtrack.odometry._lanes`: (Σ W r², Sxx, Sxy, Syy, sx, sy, Σ r², Σ |∇F|²).
+
+    ``ff`` is the flat (h·w·N) feature map, ``o`` the offset of the point's pixel (ix, iy) in it, ``row`` = w·N and
+    ``nchu`` = N (unsigned, so that the neighbours' offsets need no negative-index handling), ``rv`` the point's N
+    reference values; ``acc`` (64) and ``res`` (8) are float32 scratch arrays of the caller. The central differences
+    at the four corners are formed on the fly from the 12 surrounding pixels (all inside the image, since
+    1 < u < w−2 and 1 < v < h−2), which reads a third of the memory of the packed (F, gx, gy) layout. The constant
+    factors (½ of the central differences, fx, fy, the depth variance) are folded into two coefficients or applied
+    once after the sums. float32 per channel (the storage precision of the maps), eight lanes per sum
+    (:data:`~dmtrack.odometry._lanes.LANES32`) folded by :func:`~dmtrack.odometry._lanes.fold8x8`; the results in
+    float64. The one definition for every kernel: the general kernel and the tracker's chunked kernel inline it,
+    and its numpy reference (:func:`point_channel_sums_numpy`) gives the same bits.
     """
-    nch = ref_row.shape[0]
     f00 = np.float32(w00)
     f01 = np.float32(w01)
     f10 = np.float32(w10)
@@ -142,51 +124,74 @@ def _channel_sums(
     rs = math.sqrt(s2) if s2 > 0.0 else 0.0
     kx = np.float32(0.5 * rs * fx * g0)
     ky = np.float32(0.5 * rs * fy * g1)
-    one = np.float32(1.0)
     fn2 = np.float32(noise2)
     fhh = np.float32(huber_half)
     fh2 = np.float32(huber2)
-    err = np.float32(0.0)
-    sxx = np.float32(0.0)
-    sxy = np.float32(0.0)
-    syy = np.float32(0.0)
-    bx = np.float32(0.0)
-    by = np.float32(0.0)
-    r2sum = np.float32(0.0)
-    g2sum = np.float32(0.0)
-    for c in range(nch):
-        # corners A = (ix, iy), B = (ix+1, iy), C = (ix, iy+1), D = (ix+1, iy+1); 2·gradient = central difference
-        pa = feat[iy, ix, c]
-        pb = feat[iy, ix + 1, c]
-        pc = feat[iy + 1, ix, c]
-        pd = feat[iy + 1, ix + 1, c]
-        r = fa * ref_row[c] + fb - (f11 * pd + f01 * pc + f10 * pb + f00 * pa)
-        gx = (f11 * (feat[iy + 1, ix + 2, c] - pc) + f01 * (pd - feat[iy + 1, ix - 1, c])
-              + f10 * (feat[iy, ix + 2, c] - pa) + f00 * (pb - feat[iy, ix - 1, c]))  # fmt: skip
-        gy = (f11 * (feat[iy + 2, ix + 1, c] - pb) + f01 * (feat[iy + 2, ix, c] - pa)
-              + f10 * (pd - feat[iy - 1, ix + 1, c]) + f00 * (pc - feat[iy - 1, ix, c]))  # fmt: skip
-        r2 = r * r
-        d = kx * gx + ky * gy
-        wp = one / (fn2 + d * d)
-        e2 = r2 * wp
-        ww = wp if e2 < fh2 else wp * fhh / np.sqrt(e2)
-        r2sum += r2
-        g2sum += gx * gx + gy * gy
-        err += ww * r2
-        wgx = ww * gx
-        wgy = ww * gy
-        sxx += wgx * gx
-        sxy += wgx * gy
-        syy += wgy * gy
-        bx += wgx * r
-        by += wgy * r
-    return (np.float64(err), 0.25 * fx * fx * np.float64(sxx), 0.25 * fx * fy * np.float64(sxy),
-            0.25 * fy * fy * np.float64(syy), 0.5 * fx * np.float64(bx), 0.5 * fy * np.float64(by),
-            np.float64(r2sum), 0.25 * np.float64(g2sum))  # fmt: skip
+    for k in range(ACC32):
+        acc[k] = np.float32(0.0)
+    lanes = np.uint64(LANES32)
+    nfull = (nchu // lanes) * lanes
+    for cb in range(np.uint64(0), nfull, lanes):  # whole blocks of LANES32 channels
+        for lane in range(LANES32):
+            t = _channel_terms(ff, o, row, nchu, rv, cb + np.uint64(lane), f00, f01, f10, f11, fa, fb, kx, ky, fn2,
+                               fhh, fh2)  # fmt: skip
+            for k in range(8):
+                acc[k * LANES32 + lane] += t[k]
+    rem = nchu - nfull
+    if rem > 0:  # the last N mod LANES32 channels, into lanes 0, 1, ...
+        for lane in range(LANES32):
+            if np.uint64(lane) < rem:
+                t = _channel_terms(ff, o, row, nchu, rv, nfull + np.uint64(lane), f00, f01, f10, f11, fa, fb, kx, ky,
+                                   fn2, fhh, fh2)  # fmt: skip
+                for k in range(8):
+                    acc[k * LANES32 + lane] += t[k]
+    fold8x8(acc, res)
+    return (np.float64(res[0]), 0.25 * fx * fx * np.float64(res[1]), 0.25 * fx * fy * np.float64(res[2]),
+            0.25 * fy * fy * np.float64(res[3]), 0.5 * fx * np.float64(res[4]), 0.5 * fy * np.float64(res[5]),
+            np.float64(res[6]), 0.25 * np.float64(res[7]))  # fmt: skip
 
 
-# the kernels call this fast-math loop (not inlined): one compiled copy for every process, see _fastmath
-pin_cached(_channel_sums)
+def point_channel_sums_numpy(
+    feat: np.ndarray, ix: np.ndarray, iy: np.ndarray, rv: np.ndarray, w: tuple[np.ndarray, ...], g0: np.ndarray,
+    g1: np.ndarray, s2: np.ndarray, prm: np.ndarray,
+) -> np.ndarray:
+    """numpy reference of :func:`point_channel_sums` for m points at pixels (ix, iy) (integer arrays) with reference
+    values ``rv`` (m, N), bilinear weights ``w`` = (w00, w01, w10, w11) and depth terms g0, g1, s2 (float64 arrays
+    of m): the same float32 operations per channel and the same lane order
+    (:func:`~dmtrack.odometry._lanes.lane_sum_numpy`), so the same bits. Returns (m, 8) float64, the columns of
+    :func:`point_channel_sums`."""
+    from dmtrack.odometry._lanes import lane_sum_numpy
+
+    f32 = np.float32
+    f00, f01, f10, f11 = (np.asarray(x, np.float64).astype(f32)[:, None] for x in w)
+    fx, fy = float(prm[P_FX]), float(prm[P_FY])
+    fa, fb = f32(prm[P_A]), f32(prm[P_B])
+    s2 = np.asarray(s2, np.float64)
+    rs = np.sqrt(np.where(s2 > 0.0, s2, 0.0))
+    kx = (0.5 * rs * fx * np.asarray(g0, np.float64)).astype(f32)[:, None]
+    ky = (0.5 * rs * fy * np.asarray(g1, np.float64)).astype(f32)[:, None]
+    fn2, fhh = f32(prm[P_NOISE2]), f32(prm[P_HUBER_HALF])
+    fh2 = f32(float(prm[P_HUBER_HALF]) * float(prm[P_HUBER_HALF]))
+    F = np.asarray(feat, f32)
+    ix = np.asarray(ix, np.int64)
+    iy = np.asarray(iy, np.int64)
+    pa, pb, pc, pd = F[iy, ix], F[iy, ix + 1], F[iy + 1, ix], F[iy + 1, ix + 1]  # (m, N)
+    r = fa * np.asarray(rv, f32) + fb - (f11 * pd + f01 * pc + f10 * pb + f00 * pa)
+    gx = (f11 * (F[iy + 1, ix + 2] - pc) + f01 * (pd - F[iy + 1, ix - 1])
+          + f10 * (F[iy, ix + 2] - pa) + f00 * (pb - F[iy, ix - 1]))  # fmt: skip
+    gy = (f11 * (F[iy + 2, ix + 1] - pb) + f01 * (F[iy + 2, ix] - pa)
+          + f10 * (pd - F[iy - 1, ix + 1]) + f00 * (pc - F[iy - 1, ix]))  # fmt: skip
+    r2 = r * r
+    d = kx * gx + ky * gy
+    wp = f32(1.0) / (fn2 + d * d)
+    e2 = r2 * wp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ww = np.where(e2 < fh2, wp, wp * fhh / np.sqrt(e2))
+    wgx, wgy = ww * gx, ww * gy
+    terms = np.stack([ww * r2, wgx * gx, wgx * gy, wgy * gy, wgx * r, wgy * r, r2, gx * gx + gy * gy])  # (8, m, N)
+    sums = lane_sum_numpy(np.moveaxis(terms, 2, 0), LANES32).astype(np.float64)  # (8, m)
+    scale = np.array([1.0, 0.25 * fx * fx, 0.25 * fx * fy, 0.25 * fy * fy, 0.5 * fx, 0.5 * fy, 1.0, 0.25])
+    return (scale[:, None] * sums).T
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -224,6 +229,11 @@ def _eval_block(
     tz = T[2, 3]
     umax = w - 2.0
     vmax = h - 2.0
+    ff = feat.reshape(h * w * nch)
+    row = np.uint64(w * nch)
+    nchu = np.uint64(nch)
+    acc = scratch_f32(ACC32)
+    res = scratch_f32(8)
     n_in = 0
     err = 0.0
     good = 0
@@ -273,9 +283,9 @@ def _eval_block(
         r2sum = 0.0
         g2sum = 0.0
         if nch > 1 and not affine_sums:
-            e_p, sxx, sxy, syy, bx, by, r2sum, g2sum = _channel_sums(
-                feat, iy, ix, w00, w01, w10, w11, ref_vals[i], aff_a, aff_b, fx, fy, g0, g1, noise2, s2,
-                huber_half, huber2,
+            e_p, sxx, sxy, syy, bx, by, r2sum, g2sum = point_channel_sums(
+                ff, np.uint64((iy * w + ix) * nch), row, nchu, ref_vals[i], w00, w01, w10, w11, g0, g1, s2, aff_a,
+                aff_b, fx, fy, noise2, huber_half, huber2, acc, res,
             )  # fmt: skip
             err += e_p
         for c in range(nch if (nch == 1 or affine_sums) else 0):
@@ -580,10 +590,8 @@ def eval_pass_parallel(
 
 
 def _eval_multi(*args):  # type: ignore[no-untyped-def]
-    """:func:`eval_pass_parallel` on one thread: the serial multichannel evaluation is the same compiled code
-    as the threaded one, so the two are bit-identical by construction. (Two separately compiled kernels are not:
-    the vectorised float32 channel loop lets LLVM choose its reduction order per compilation context, and a
-    serial and a ``prange`` caller may end up with different ones.)"""
+    """:func:`eval_pass_parallel` on one thread: the serial multichannel evaluation (one compiled kernel for
+    both; fixed blocks and fixed lanes make its result independent of the thread count)."""
     prev = numba.get_num_threads()
     numba.set_num_threads(1)
     try:

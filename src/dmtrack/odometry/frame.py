@@ -219,9 +219,7 @@ def gradients_numpy(feat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 def _magnitude_sum(gx: np.ndarray, gy: np.ndarray) -> np.float32:  # pragma: no cover - compiled
     """Σ_c sqrt(gx_c² + gy_c²) in float32 (N > 1), in channel order: the same bits as :func:`gradients_numpy`.
 
-    Plain IEEE arithmetic, not fast-math: LLVM inlines this small loop into the ``prange`` body of
-    :func:`_gradients_kernel`, where a re-associated sum would round differently in the run that compiles the
-    kernel and in the runs that load it from numba's cache (see :mod:`dmtrack.odometry._fastmath`).
+    Plain IEEE arithmetic in channel order, like every sum in the odometry (see :mod:`dmtrack.odometry._lanes`).
     """
     s = np.float32(0.0)
     for c in range(gx.shape[0]):

@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.geometry.exact import dot, matmul
 from dmtrack.odometry._tracker_multi import tracker_eval_kernels
 from dmtrack.odometry._tracker_normal_equations import (
     se3_exp,
@@ -455,7 +456,7 @@ class Tracker:
                 while True:
                     inc = self._solve(A, bvec, lam)
                     inc_try += 1
-                    T_new = se3_exp(inc) @ T
+                    T_new = matmul(se3_exp(inc), T)
                     trial = self._evaluate(lv, T_new, a, b, bufs[1 - cur], ch_scale)
                     evaluations[lvl] += 1
                     last = trial
@@ -472,7 +473,7 @@ class Tracker:
                         last_residual = last_err = trial.error
                         lam = 0.0 if lam <= 0.2 else lam * cfg.lambda_success_fac
                         break
-                    if not (float(inc @ inc) > cfg.step_size_min):
+                    if not (dot(inc, inc) > cfg.step_size_min):
                         it = max_its
                         break
                     lam = 0.2 if lam == 0 else lam * cfg.lambda_fail_fac**inc_try

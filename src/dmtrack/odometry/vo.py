@@ -60,6 +60,7 @@ import numba
 import numpy as np
 
 from dmtrack.errors import InputError
+from dmtrack.geometry.exact import dot, matmul
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import Frame, build_frame
@@ -79,9 +80,9 @@ def keyframe_score(T_fk: np.ndarray, mean_idepth: float, point_usage: float, dis
     ``t`` is the frame's position in keyframe coordinates (translation of T_fk⁻¹).
     """
     R = T_fk[:3, :3]
-    t_kf = -R.T @ T_fk[:3, 3]
+    t_kf = -matmul(R.T, T_fk[:3, 3])
     d = t_kf * mean_idepth
-    return float(d @ d) * dist_w * dist_w + (1.0 - point_usage) ** 2 * usage_w * usage_w
+    return dot(d, d) * dist_w * dist_w + (1.0 - point_usage) ** 2 * usage_w * usage_w
 
 
 _CONCURRENT_LAYERS = ("tbb", "omp")
@@ -126,7 +127,7 @@ def _inv_se3(T: np.ndarray) -> np.ndarray:
     Ti = np.eye(4)
     R = T[:3, :3]
     Ti[:3, :3] = R.T
-    Ti[:3, 3] = -R.T @ T[:3, 3]
+    Ti[:3, 3] = -matmul(R.T, T[:3, 3])
     return Ti
 
 
@@ -454,7 +455,7 @@ class VisualOdometry:
             )  # fmt: skip
 
         T_fk = res.T_fk
-        T_wc = _se3_part(self._S_wk @ _inv_se3(T_fk), self._s_wk)
+        T_wc = _se3_part(matmul(self._S_wk, _inv_se3(T_fk)), self._s_wk)
         self._record_pose(index, timestamp, T_wc)
 
         # ---- keyframe selection and mapping
@@ -572,7 +573,7 @@ class VisualOdometry:
         old_dm, old_kf, old_id = self._dm, self._kf, self._kf_id
         new_dm = old_dm.create_keyframe(frame, res.T_fk, res.ref_pixel_was_good)  # finalises old_dm in place
         rho = float(new_dm.scale_from_parent)
-        self._S_wk = self._S_wk @ _sim3(_inv_se3(res.T_fk), rho)
+        self._S_wk = matmul(self._S_wk, _sim3(_inv_se3(res.T_fk), rho))
         self._s_wk *= rho
         self._kf, self._dm = frame, new_dm
         self._kf_id = old_id + 1

@@ -13,7 +13,7 @@ from dmtrack.datasets.base import Sequence
 from dmtrack.errors import DmtrackError, Interrupted, OutputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.trajectory import Trajectory
-from dmtrack.odometry._fastmath import kernel_target
+from dmtrack.odometry._target import kernel_target
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.vo import VOResult
 

@@ -43,16 +43,28 @@ def _watched_state() -> dict[str, object]:
                              numba.config.DISABLE_JIT, numba.config.THREADING_LAYER)}  # fmt: skip
 
 
+def _check_unchanged(before: dict[str, object], what: str) -> None:
+    after = _watched_state()
+    changed = {k: (before[k], after[k]) for k in before if before[k] != after[k]}
+    if changed:
+        pytest.fail(f"{what} left the process changed: {changed}", pytrace=False)
+
+
 @pytest.fixture(autouse=True)
 def _leaves_the_process_as_it_found_it(request: pytest.FixtureRequest) -> Iterator[None]:
     """Every test leaves numba's thread count, numba's configuration and the environment variables the kernels read
     as it found them: a test that changed them would change what the tests after it compile or run (issue 41)."""
     before = _watched_state()
     yield
-    after = _watched_state()
-    changed = {k: (before[k], after[k]) for k in before if before[k] != after[k]}
-    if changed:
-        pytest.fail(f"{request.node.nodeid} left the process changed: {changed}", pytrace=False)
+    _check_unchanged(before, request.node.nodeid)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _module_leaves_the_process_as_it_found_it(request: pytest.FixtureRequest) -> Iterator[None]:
+    """The same for a test module as a whole: its module-scoped fixtures included."""
+    before = _watched_state()
+    yield
+    _check_unchanged(before, f"{request.node.nodeid} (its module fixtures)")
 
 
 @pytest.fixture(scope="session")

@@ -78,9 +78,7 @@ def test_same_seed_same_bytes(synth_run: tuple[Path, object], tmp_path: Path) ->
     assert (tmp_path / "keyframes.txt").read_bytes() == (out / "keyframes.txt").read_bytes()
 
 
-def test_cli_threads_option_gives_the_same_trajectory(
-    synth_run: tuple[Path, object], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_cli_threads_option_gives_the_same_trajectory(synth_run: tuple[Path, object], tmp_path: Path) -> None:
     """`dmtrack run --threads 1` runs the kernels serially: byte-identical to the default (all cores) run."""
     import os
 
@@ -88,11 +86,9 @@ def test_cli_threads_option_gives_the_same_trajectory(
 
     from dmtrack.experiments.task import THREAD_ENV_VARS
 
-    for var in (*THREAD_ENV_VARS, "DMTRACK_FEATURE_THREADS"):  # restored by monkeypatch afterwards
-        if var in os.environ:
-            monkeypatch.setenv(var, os.environ[var])
-        else:
-            monkeypatch.delenv(var, raising=False)
+    # main() sets these for its process: put back exactly what was there (monkeypatch.delenv of a variable that is
+    # not set records nothing, so it would not remove one that main() then set: a leak into later tests, issue 41)
+    saved = {var: os.environ.get(var) for var in (*THREAD_ENV_VARS, "DMTRACK_FEATURE_THREADS")}
     prev = numba.get_num_threads()
     try:
         rc = main(["run", SYNTH, "--threads", "1", "--out", str(tmp_path), "--no-progress", "--no-pointcloud",
@@ -100,6 +96,11 @@ def test_cli_threads_option_gives_the_same_trajectory(
         assert rc == 0 and numba.get_num_threads() == 1
     finally:
         numba.set_num_threads(prev)
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
     out, _ = synth_run
     assert (tmp_path / "trajectory.txt").read_bytes() == (out / "trajectory.txt").read_bytes()
     assert main(["run", SYNTH, "--threads", "0", "--out", str(tmp_path / "x")]) == 1

@@ -47,11 +47,12 @@ from dmtrack.odometry._depth_common import (
     P_MIN_EPL_LEN2,
     P_PIX_NOISE2,
     P_SUBPIXEL,
+    _bilinear,
     _sample,
     _sample1,
     bilinear_reference,
 )
-from dmtrack.odometry._lanes import LANES64, lane_dots4, lane_window4, scratch_f64
+from dmtrack.odometry._lanes import LANES64, lane_dots4, lane_sample_stats4, lane_window4, scratch_f64
 
 # ------------------------------------------------------------------------------------------ constants
 #: ``GRADIENT_SAMPLE_DIST``: distance (pixels) between the 5 stereo samples.
@@ -142,22 +143,37 @@ def _kf_norms(kfv):  # pragma: no cover - compiled
     return (_fold4(acc, 0), _fold4(acc, 1), _fold4(acc, 2), _fold4(acc, 3), _fold4(acc, 4))
 
 
+@numba.njit(**_JIT_INLINE)
+def _stats_lane(img, ix, iy, w00, w01, w10, w11, c, ring, row, prow, kfv, acc, lane):  # pragma: no cover - compiled
+    """Channel ``c`` of :func:`_sample_stats` into lane ``lane`` of its seven sums (the last N mod 4 channels)."""
+    v = w11 * img[iy + 1, ix + 1, c] + w01 * img[iy + 1, ix, c] + w10 * img[iy, ix + 1, c] + w00 * img[iy, ix, c]
+    ring[row, c] = v
+    acc[lane] += v * v
+    for j in range(5):
+        acc[(j + 1) * LANES64 + lane] += v * kfv[j, c]
+    acc[6 * LANES64 + lane] += v * ring[prow, c]
+
+
 @numba.njit(**_JIT_LANES)
 def _sample_stats(img, x, y, ring, row, prow, kfv, st):  # pragma: no cover - compiled
     """Bilinear sample s of all channels at (x, y) into ``ring[row]`` and its statistics into ``st[row]``:
     (‖s‖², ⟨s, k_0⟩ … ⟨s, k_4⟩, ⟨s, ring[prow]⟩) with k_j the keyframe samples (N > 1; ``ring`` and ``kfv``
-    zero-padded as in :func:`_window_cost`), each in four lanes (:func:`~dmtrack.odometry._lanes.lane_dots4`).
+    zero-padded as in :func:`_window_cost`), each in four lanes (:func:`~dmtrack.odometry._lanes.lane_sample_stats4`
+    for the whole blocks of channels, the rest here).
 
     With them every 5-sample SSD of the search and its cross term with the previous step are sums of
     scalars (see :func:`_line_stereo`): one pass over the N channels per search step instead of five.
     """
-    _sample(img, x, y, ring, row)
+    ix, iy, w00, w01, w10, w11 = _bilinear(x, y)
+    nch = img.shape[2]
+    nfull = (nch // LANES64) * LANES64
+    _padded(ring.shape[1])
     acc = scratch_f64(_ACC7)
     for k in range(_ACC7):
         acc[k] = 0.0
-    s = ring[row]
-    lane_dots4(acc, (s, s, s, s, s, s, s), (s, kfv[0], kfv[1], kfv[2], kfv[3], kfv[4], ring[prow]),
-               _padded(ring.shape[1]))  # fmt: skip
+    lane_sample_stats4(acc, img, ix, iy, (w00, w01, w10, w11), ring, row, prow, kfv, nfull)
+    for c in range(nfull, nch):
+        _stats_lane(img, ix, iy, w00, w01, w10, w11, c, ring, row, prow, kfv, acc, c - nfull)
     for k in range(7):
         st[row, k] = _fold4(acc, k)
 

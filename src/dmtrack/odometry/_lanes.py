@@ -213,6 +213,65 @@ def lane_window4(typingctx, out, s, sp, k, n):  # pragma: no cover - compiled
     return sig, codegen
 
 
+@intrinsic
+def lane_sample_stats4(typingctx, out, img, ix, iy, w, ring, row, prow, kfv, n):  # pragma: no cover - compiled
+    """The bilinear sample s of channels ``0 … n − 1`` (``n`` a multiple of :data:`LANES64`) of the (H, W, N) float32
+    map ``img`` at corner (ix, iy) with weights ``w`` = (w00, w01, w10, w11) — ``s_c = ((w11·d + w01·c) + w10·b) +
+    w00·a`` in float64, a … d the corners (ix, iy), (ix+1, iy), (ix, iy+1), (ix+1, iy+1), as
+    :func:`~dmtrack.odometry._depth_common._sample` forms it — stored into ``ring[row]``, and the lane sums
+    ``out[4 k + l] += Σ_b s·y_k`` with y = (s, kfv[0], …, kfv[4], ring[prow]) at the channels 4 b + l: one pass over
+    the channels, <4 x double> arithmetic (IEEE). ``ring`` (·, N') and ``kfv`` (5, N'): C-contiguous float64."""
+    f64_2d = isinstance(ring, types.Array) and ring.ndim == 2 and ring.layout == "C" and ring.dtype == types.float64
+    ok = (isinstance(out, types.CPointer) and out.dtype == types.float64 and isinstance(img, types.Array)
+          and img.ndim == 3 and img.layout == "C" and img.dtype == types.float32 and f64_2d and kfv == ring
+          and isinstance(w, types.UniTuple) and w.count == 4 and w.dtype == types.float64
+          and all(isinstance(a, types.Integer) for a in (ix, iy, row, prow, n)))  # fmt: skip
+    if not ok:
+        raise TypingError(f"lane_sample_stats4: got {out}, {img}, {ix}, {iy}, {w}, {ring}, {row}, {prow}, {kfv}, {n}")
+    sig = types.void(out, img, ix, iy, w, ring, row, prow, kfv, n)
+
+    def codegen(context, builder, signature, args):
+        out_ptr, imgv, ixv, iyv, wv, ringv, rowv, prowv, kfvv, nv = args
+        i64 = ir.IntType(64)
+        im = context.make_array(img)(context, builder, imgv)
+        rg = context.make_array(ring)(context, builder, ringv)
+        kf = context.make_array(kfv)(context, builder, kfvv)
+        shape = cgutils.unpack_tuple(builder, im.shape, 3)
+        width, nch = shape[1], shape[2]
+        as64 = [context.cast(builder, v, t, types.int64) for v, t in ((ixv, ix), (iyv, iy), (rowv, row), (prowv, prow))]
+        x, y, r, rp = as64
+        npad = cgutils.unpack_tuple(builder, rg.shape, 2)[1]
+        base = builder.mul(builder.add(builder.mul(y, width), x), nch)  # offset of corner a
+        offs = [base, builder.add(base, nch), builder.add(base, builder.mul(width, nch)),
+                builder.add(builder.add(base, builder.mul(width, nch)), nch)]  # a, b, c, d
+        corners = [builder.gep(im.data, [o]) for o in offs]
+        ring_row = builder.gep(rg.data, [builder.mul(r, npad)])
+        ring_prev = builder.gep(rg.data, [builder.mul(rp, npad)])
+        kf_rows = [builder.gep(kf.data, [builder.mul(ir.Constant(i64, j), npad)]) for j in range(5)]
+        v4 = ir.VectorType(ir.DoubleType(), LANES64)
+        f4 = ir.VectorType(ir.FloatType(), LANES64)
+        ws = [cgutils.unpack_tuple(builder, wv, 4)[k] for k in range(4)]  # w00, w01, w10, w11
+        splat = [builder.insert_element(ir.Constant(v4, ir.Undefined), wk, ir.Constant(ir.IntType(32), 0))
+                 for wk in ws]  # fmt: skip
+        zeros4 = ir.Constant(ir.VectorType(ir.IntType(32), LANES64), [0] * LANES64)
+        w00, w01, w10, w11 = (builder.shuffle_vector(sv, sv, zeros4) for sv in splat)
+        nn = context.cast(builder, nv, n, types.int64)
+
+        def body(c, _v4):  # type: ignore[no-untyped-def]
+            a, b, cc, d = (builder.fpext(builder.load(builder.bitcast(builder.gep(p, [c]), f4.as_pointer()), align=4),
+                                         v4) for p in corners)  # fmt: skip
+            s = builder.fadd(builder.fadd(builder.fadd(builder.fmul(w11, d), builder.fmul(w01, cc)),
+                                          builder.fmul(w10, b)), builder.fmul(w00, a))  # fmt: skip
+            builder.store(s, builder.bitcast(builder.gep(ring_row, [c]), v4.as_pointer()), align=8)
+            ys = [s, *(_load4(builder, k, c, v4) for k in kf_rows), _load4(builder, ring_prev, c, v4)]
+            return [builder.fmul(s, yk) for yk in ys]
+
+        _lane_loop(context, builder, out_ptr, nn, 7, body)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 def lane_sum_numpy(terms: np.ndarray, lanes: int) -> np.ndarray:
     """The kernels' channel sum of per-channel ``terms`` (N, …) in their dtype, bit for bit: lane ``l`` adds the
     channels ``c ≡ l (mod lanes)`` in order (the last ``N mod lanes`` into lanes 0, 1, …), then the lanes fold

@@ -6,9 +6,11 @@ with ``requires_shared``) and are skipped with a clear reason when it is absent.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -41,6 +43,29 @@ def _watched_state() -> dict[str, object]:
     return {"environment": env, "numba threads": numba.get_num_threads(),
             "numba config": (numba.config.NUMBA_NUM_THREADS, numba.config.CPU_NAME, numba.config.CPU_FEATURES,
                              numba.config.DISABLE_JIT, numba.config.THREADING_LAYER)}  # fmt: skip
+
+
+@contextlib.contextmanager
+def restored_process_state() -> Iterator[None]:
+    """Put back, on exit, the watched environment variables and numba's thread count: for fixtures that run code
+    that sets them for its own process on purpose (``dmtrack run --threads``, a Dask nanny)."""
+    import numba
+
+    env = {k: v for k, v in os.environ.items() if k.startswith(_WATCHED_ENV)}
+    threads = numba.get_num_threads()
+    try:
+        yield
+    finally:
+        for k in [k for k in os.environ if k.startswith(_WATCHED_ENV) and k not in env]:
+            del os.environ[k]
+        os.environ.update(env)
+        numba.set_num_threads(threads)
+
+
+@pytest.fixture(scope="session")
+def restored_state() -> Any:
+    """:func:`restored_process_state`, for fixtures (``with restored_state(): …``)."""
+    return restored_process_state
 
 
 def _check_unchanged(before: dict[str, object], what: str) -> None:

@@ -24,8 +24,9 @@ N = 10
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    with distributed.LocalCluster(
+def cluster(restored_state):  # noqa: ANN001
+    # the nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1 and PYTHONHASHSEED in this process's environment for its workers
+    with restored_state(), distributed.LocalCluster(
         n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
     ) as c:
         yield c

@@ -62,13 +62,14 @@ def points(batches: list, component: str = "Points3D:positions") -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def recorded(sample_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+def recorded(sample_dir: Path, tmp_path_factory: pytest.TempPathFactory, restored_state) -> tuple[Path, Path, Path]:  # noqa: ANN001
     """``dmtrack run`` of the sample, once with --rrd (in the run folder, which the run cleans of temporary files
     before its first frame) and once without."""
     tmp = tmp_path_factory.mktemp("rerun")
     args = ["run", str(sample_dir), "--max-frames", str(N_FRAMES), "--threads", "2"]
-    assert main([*args, "--out", str(tmp / "with"), "--rrd", str(tmp / "with" / "run.rrd")]) == 0
-    assert main([*args, "--out", str(tmp / "without")]) == 0
+    with restored_state():  # --threads sets the thread variables of its process
+        assert main([*args, "--out", str(tmp / "with"), "--rrd", str(tmp / "with" / "run.rrd")]) == 0
+        assert main([*args, "--out", str(tmp / "without")]) == 0
     return tmp / "with", tmp / "without", tmp / "with" / "run.rrd"
 
 

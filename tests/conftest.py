@@ -32,17 +32,46 @@ def _isolated_user_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
     os.environ["DMTRACK_HOME"] = str(tmp_path_factory.mktemp("dmtrack-home"))
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _ctrl_c_as_on_a_terminal() -> Iterator[None]:
+    """Ctrl-C as a terminal delivers it. A shell without job control starts a background job (``make test &``, a CI
+    runner's step) with SIGINT ignored, which Python and every process it starts inherit: the tests of Ctrl-C would
+    then see no KeyboardInterrupt, and their ``dmtrack run`` children no SIGINT at all. Python's own handler,
+    installed here, is reset to the default when a child process starts, so the children get Ctrl-C too."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 #: environment variables that numba, BLAS, OpenCV or dmtrack read (some only once, at import or compile time)
 _WATCHED_ENV = ("NUMBA_", "DMTRACK_", "OMP_", "OPENBLAS_", "MKL_", "KMP_", "NPY_", "OPENCV_", "PYTHONHASHSEED")
 
 
 def _watched_state() -> dict[str, object]:
+    import signal
+
     import numba
 
     env = {k: v for k, v in os.environ.items() if k.startswith(_WATCHED_ENV)}
+    home = Path(os.environ.get("DMTRACK_HOME", "")) if os.environ.get("DMTRACK_HOME") else None
+    files = sorted(str(p.relative_to(home)) for p in home.rglob("*")) if home is not None and home.is_dir() else []
+    handlers = {name: _handler_name(signal.getsignal(getattr(signal, name)))
+                for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)}  # fmt: skip
     return {"environment": env, "numba threads": numba.get_num_threads(),
             "numba config": (numba.config.NUMBA_NUM_THREADS, numba.config.CPU_NAME, numba.config.CPU_FEATURES,
-                             numba.config.DISABLE_JIT, numba.config.THREADING_LAYER)}  # fmt: skip
+                             numba.config.DISABLE_JIT, numba.config.THREADING_LAYER),
+            "signal handlers": handlers, "files in DMTRACK_HOME": files}  # fmt: skip
+
+
+def _handler_name(h: Any) -> str:
+    return getattr(h, "__qualname__", None) or repr(h)
 
 
 @contextlib.contextmanager

@@ -103,8 +103,11 @@ def test_features_listing(capsys: pytest.CaptureFixture[str]) -> None:
     assert "bitplanes" in capsys.readouterr().out
 
 
-def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sample_dir: Path) -> None:
+def test_calibrate_scale_save_and_fit_pca(capsys: pytest.CaptureFixture[str], sample_dir: Path, tmp_path: Path,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
     from dmtrack.features import get_feature
+
+    monkeypatch.setenv("DMTRACK_HOME", str(tmp_path))  # the saved scale and basis are this test's, not the session's
 
     assert main(["calibrate-scale", "--feature", "rgb", str(sample_dir), "--frames", "2", "--save", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)

@@ -9,9 +9,11 @@ plotting backend.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import warnings
+from collections.abc import Iterator as _Iter
 from collections.abc import Sequence as _Seq
 from typing import Any
 
@@ -607,29 +609,39 @@ def _interrupt_code(e: KeyboardInterrupt) -> int:
     return e.exit_code if isinstance(e, Interrupted) else 130
 
 
-def _terminate_as_interrupt() -> None:
-    """SIGTERM (``kill PID``, a job scheduler's stop) and SIGHUP stop a command like Ctrl-C does (main thread only)."""
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> _Iter[None]:
+    """SIGTERM (``kill PID``, a job scheduler's stop) and SIGHUP stop a command like Ctrl-C does (main thread only);
+    the handlers they had before come back when the command returns (``main`` called in a longer-lived process)."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
+        yield
         return
 
     def handler(signum: int, frame: object) -> None:
         raise Interrupted(signal.Signals(signum).name, signum)
 
+    before = {}
     for name in ("SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
-            signal.signal(getattr(signal, name), handler)
+            before[name] = signal.signal(getattr(signal, name), handler)
+    try:
+        yield
+    finally:
+        for name, old in before.items():
+            signal.signal(getattr(signal, name), old)
 
 
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    showwarning = warnings.showwarning
     warnings.showwarning = _showwarning
-    _terminate_as_interrupt()
     try:
-        return int(args.func(args) or 0)
+        with _terminate_as_interrupt():
+            return int(args.func(args) or 0)
     except DmtrackError as e:
         print(f"dmtrack: error: {e}", file=sys.stderr)
         return 1
@@ -641,6 +653,8 @@ def main(argv: _Seq[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    finally:
+        warnings.showwarning = showwarning
 
 
 if __name__ == "__main__":  # pragma: no cover

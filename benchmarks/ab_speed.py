@@ -30,11 +30,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _run(src: Path, cache: Path, sequence: str, feature: str, frames: int, out: Path) -> dict:
+def _run(src: Path, cache: Path, sequence: str, feature: str, frames: int, out: Path, extra: list[str]) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
     env.update(PYTHONPATH=str(src), NUMBA_CACHE_DIR=str(cache))
     cmd = [sys.executable, "-m", "dmtrack.cli", "run", sequence, "--feature", feature, "--max-frames", str(frames),
-           "--out", str(out), "--no-progress"]  # fmt: skip
+           "--out", str(out), "--no-progress", *extra]  # fmt: skip
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
@@ -54,6 +54,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--extra", default="", help="more arguments of dmtrack run, e.g. '--init random'")
     args = ap.parse_args(argv)
     trees = {"A": args.a.resolve(), "B": args.b.resolve()}
     features = args.features.split(",")
@@ -63,10 +64,11 @@ def main(argv: list[str] | None = None) -> None:
     runs: dict[str, dict[str, list[dict]]] = {k: {f: [] for f in features} for k in trees}
     for feature in features:
         for k, src in trees.items():  # warm-up: compile into the tree's cache
-            _run(src, caches[k], args.sequence, feature, 5, work / "warm")
+            _run(src, caches[k], args.sequence, feature, 5, work / "warm", args.extra.split())
         for r in range(args.rounds):
             for k in ("A", "B") if r % 2 == 0 else ("B", "A"):
-                res = _run(trees[k], caches[k], args.sequence, feature, args.frames, work / f"{k}-{feature}-{r}")
+                res = _run(trees[k], caches[k], args.sequence, feature, args.frames, work / f"{k}-{feature}-{r}",
+                           args.extra.split())
                 runs[k][feature].append(res)
                 print(f"{feature} round {r} {k}: {res['fps']:.2f} fps, {res['wall_s']:.2f} s", flush=True)
     summary = {}
@@ -84,6 +86,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{feature}: A {row['A']['fps_median']:.2f} fps, B {row['B']['fps_median']:.2f} fps, "
               f"B/A {row['b_over_a_fps']:.3f} (wall B/A {row['b_over_a_wall']:.3f})")  # fmt: skip
     result = {"trees": {k: str(v) for k, v in trees.items()}, "sequence": args.sequence, "frames": args.frames,
+              "extra": args.extra,
               "rounds": args.rounds, "cpu": _cpu(), "load_before": load_before, "load_after": os.getloadavg(),
               "summary": summary, "runs": runs}  # fmt: skip
     if args.out:

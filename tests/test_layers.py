@@ -24,6 +24,7 @@ LAYERS: list[set[str]] = [
     {"odometry"},
     {"initialization"},
     {"slam"},
+    {"relocalisation"},
     {"training"},
     {"viz"},
     {"outputs"},

@@ -215,6 +215,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             config=config,
             start=args.start,
             max_frames=args.max_frames,
+            frames=args.frames,
             seed=args.seed,
             format=args.format,
             intrinsics=args.intrinsics,
@@ -243,6 +244,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"start: geometric refused, random map (seed {m['seed']}) instead")
     if m.get("realtime"):
         print(f"realtime: {m['dropped_frames']} frames dropped")
+    if m.get("lost_frames") or m.get("relocalisations"):
+        found = ", ".join(f"frame {r['frame']} on keyframe {r['keyframe']} (lost since {r['lost_since']})"
+                          for r in m.get("relocalised", [])[:5])  # fmt: skip
+        segments = len(m.get("segments", []))
+        print(f"losses: {m['lost_frames']} frames without a pose, {m['relocalisations']} relocalisations"
+              + (f": {found}" if found else "") + (f"; {segments} map segments" if segments > 1 else ""))
     where = f" on {m['device']} ({m['gpu']})" if m.get("gpu") else ""
     print(f"speed: {m['fps']:.1f} fps  (per frame: feature {m['feature_ms']:.1f} ms{where}, "
           f"tracking {m['tracking_ms']:.1f} ms, mapping {m['mapping_ms']:.1f} ms, reading {m['io_ms']:.1f} ms); "
@@ -474,6 +481,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default out/SEQUENCE-FEATURE)")
     p.add_argument("--start", type=int, default=0, metavar="N", help="first frame (default 0)")
     p.add_argument("--max-frames", type=int, metavar="N", help="process at most N frames")
+    p.add_argument("--frames", metavar="RANGES",
+                   help="run on these frames of the sequence only, e.g. 0-349,500-699 (inclusive ranges, A:B half-open "
+                        "ones, single frames; increasing); --start and --max-frames then count in them. Frames left "
+                        "out make a camera that jumps (a kidnapped camera)")
     p.add_argument("--seed", type=int, metavar="S", help="seed of the random depth initialisation (default 0)")
     p.add_argument("--config", metavar="YAML", help="odometry parameters (sections tracker, depth, keyframe)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
@@ -490,7 +501,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "gtsam; trajectory.txt is the optimised one, the odometry's is trajectory_vo.txt "
                         "(pip install 'dmtrack[slam]'; docs/slam.md)")
     p.add_argument("--continue-after-loss", action="store_true",
-                   help="keep going after a tracking loss (default: stop there, as the paper counts tracked frames)")
+                   help="keep going after a tracking loss: the lost frames get no pose until the camera is found "
+                        "again on a keyframe of the run (relocalisation); without --slam a loss that lasts begins a "
+                        "new map (default: stop at the first loss, as the paper counts tracked frames; a live camera "
+                        "always goes on)")
     p.add_argument("--no-depth-images", action="store_true", help="do not write depth/*.png")
     p.add_argument("--no-pointcloud", action="store_true", help="do not write pointcloud.ply")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

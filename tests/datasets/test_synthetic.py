@@ -459,3 +459,24 @@ def test_inverse_depth(seq: SyntheticSequence) -> None:
     inv = seq.inverse_depth(7)
     assert inv.dtype == np.float32 and inv.shape == (120, 160)
     np.testing.assert_allclose(inv, 1.0 / seq[7].depth, rtol=1e-6)
+
+
+def test_forward_motion_drives_down_a_hall() -> None:
+    """``motion=forward``: the camera moves along +x at the given speed, looking ahead, in an empty 30 m hall."""
+    from dmtrack.datasets import open_sequence
+    from dmtrack.errors import InputError
+
+    seq = open_sequence("synthetic:motion=forward,fps=10,speed=2,n_frames=30,width=64,height=48,seed=3")
+    P = seq.poses
+    step = np.diff(P[:, :3, 3], axis=0)
+    assert np.allclose(step[:, 0], 0.2) and np.all(np.abs(step[:, 1:]) < 0.02)  # 2 m/s at 10 Hz, forward
+    fwd = P[:, :3, 2]  # the optical axis stays within a few degrees of the direction of motion
+    assert np.all(np.degrees(np.arccos(np.clip(fwd[:, 0], -1, 1))) < 5.0)
+    assert seq.config.setting("room_size") == (30.0, 5.0, 3.0) and seq.config.setting("n_boxes") == 0
+    assert seq.scene.room_hi[0] - seq.scene.room_lo[0] == 30.0
+    img = seq[10].image
+    assert img.shape == (48, 64) and img.std() > 10  # textured walls
+    with pytest.raises(InputError, match="longer than"):
+        open_sequence("synthetic:motion=forward,fps=10,speed=10,n_frames=40,width=64,height=48")
+    with pytest.raises(InputError, match="motion must be one of"):
+        open_sequence("synthetic:motion=sideways")

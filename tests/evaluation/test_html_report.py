@@ -167,6 +167,28 @@ def test_run_report_shows_the_metrics_and_is_self_contained(run_dir: Path):
         assert img is not None and img.shape[1] == 320 and img.shape[0] == 240
 
 
+def test_a_run_that_was_lost_and_found_again_shows_where(tmp_path: Path):
+    """A kidnapped synthetic camera (frames 0–59, then 270–299 of seed 4's path, which revisits its start) with
+    --continue-after-loss: the losses section lists each span without a pose and the keyframe it ended on, as
+    metrics.json has them, draws their time line, and marks the relocalisations on the top view."""
+    out = tmp_path / "kidnapped"
+    assert main(["run", "synthetic:n_frames=330,width=320,height=240,seed=4", "--frames", "0-59,270-299",
+                 "--continue-after-loss", "--no-depth-images", "--out", str(out)]) == 0  # fmt: skip
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["relocalisations"] >= 1 and m["lost_spans"], m
+    text, doc = parse(write_html_report(out))
+    assert_self_contained(text, doc)
+    assert "Losses and relocalisation" in text
+    rows = next(t for t in doc.tables if t and t[0] == ["frames without a pose", "frames", "how it ended"])[1:]
+    assert len(rows) == len(m["lost_spans"])
+    first, last = m["lost_spans"][0]
+    found = m["relocalised"][0]
+    assert rows[0] == [f"{first}–{last}", str(last - first + 1),
+                       f"relocalised at frame {found['frame']} on keyframe {found['keyframe']}"]  # fmt: skip
+    assert figure_count(text) == 5  # the time line besides the four figures of a run
+    assert f"relocalised ({m['relocalisations']})" in text  # the markers on the top view
+
+
 def test_run_report_aligns_the_trajectory_with_the_evaluation_of_the_run(run_dir: Path):
     """The position errors drawn are those of the Sim(3) alignment behind metrics.json's ATE."""
     text, _ = parse(run_dir / REPORT_HTML)

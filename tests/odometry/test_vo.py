@@ -372,3 +372,16 @@ def test_keyframe_emitted_once_when_the_sink_raises(seq, frames) -> None:
     vo.finish()
     ids = [k.keyframe_id for k in sink.keyframes]
     assert ids == [0, 1]
+
+
+def test_a_config_yaml_of_an_earlier_version_still_reads() -> None:
+    """``initializer.refine_iterations`` was removed (issue 37): a config.yaml written with its only value, 0, still
+    reads; any other value is refused with the reason."""
+    from dmtrack.errors import InputError
+
+    c = VOConfig.from_dict({"initializer": {"refine_iterations": 0, "corners": 500}})
+    assert c.initializer.corners == 500
+    with pytest.raises(InputError, match="no longer supported"):
+        VOConfig.from_dict({"initializer": {"refine_iterations": 2}})
+    with pytest.raises(InputError, match="no longer supported"):
+        VOConfig().with_overrides("initializer.refine_iterations=1")

@@ -285,3 +285,29 @@ def test_sink_with_the_four_methods_only_and_unix_times(tmp_path: Path) -> None:
     empty = RerunSink(rrd=tmp_path / "empty.rrd")
     empty.close()  # no call at all: still a valid recording
     assert load(tmp_path / "empty.rrd")[0].application_id == "dmtrack"
+
+
+def test_a_relocalisation_is_drawn_live_and_from_the_run_folder(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A kidnapped synthetic camera (seed 4: frames 0–59, then 270–299, which revisit the start) with
+    --continue-after-loss: the live recording and ``dmtrack view`` of the folder both put a magenta point where the
+    camera was found again, at the relocalised frame's position."""
+    out = tmp_path / "run"
+    assert main(["run", "synthetic:n_frames=330,width=320,height=240,seed=4", "--frames", "0-59,270-299",
+                 "--continue-after-loss", "--no-depth-images", "--out", str(out),
+                 "--rrd", str(tmp_path / "live.rrd")]) == 0  # fmt: skip
+    metrics = json.loads((out / "metrics.json").read_text())
+    (found,) = metrics["relocalised"]
+    traj = read_tum(out / "trajectory.txt")
+    where = traj.positions[int(np.argmin(np.abs(traj.timestamps - found["timestamp"])))]
+    _, live = load(tmp_path / "live.rrd")
+    (frame, _), *_ = rows(live["/world/relocalisations"], "Points3D:positions")
+    assert frame == found["frame"]
+    np.testing.assert_allclose(points(live["/world/relocalisations"]), [where], atol=1e-5)
+    text = [v[0] for _, v in rows(live["/log"], "TextLog:text")]
+    assert f"relocalised at frame {found['frame']} on keyframe {found['keyframe']}, lost since frame " + str(
+        found["lost_since"]) in text
+    assert main(["view", str(out), "--rrd", str(tmp_path / "view.rrd")]) == 0
+    capsys.readouterr()
+    _, view = load(tmp_path / "view.rrd")
+    np.testing.assert_allclose(points(view["/world/relocalisations"]), [where], atol=1e-5)

@@ -3,8 +3,9 @@
 LSD-SLAM (and the paper) start the first keyframe from a random inverse depth; the map converges, or not, over
 the first 100–150 frames, and that decides the accuracy of the whole run. :class:`GeometricInitializer` instead
 waits until the camera has moved enough, finds the relative motion from tracked corners (OpenCV: KLT, essential
-matrix and homography with RANSAC, triangulation; a bundle adjustment by ``scipy.optimize.least_squares``) and
-makes the first keyframe's map with the odometry's own stereo from the frames seen (docs/initialization.md).
+matrix and homography with RANSAC, triangulation; a Schur-complement Levenberg–Marquardt bundle adjustment, with
+``scipy.optimize.least_squares`` as its test reference) and makes the first keyframe's map with the odometry's own
+stereo from the frames seen (docs/initialization.md).
 
 It sits above :mod:`dmtrack.odometry`, which only receives the result
 (:class:`~dmtrack.odometry.initial_map.InitialMap`); :func:`dmtrack.track` runs it when ``VOConfig.init`` is

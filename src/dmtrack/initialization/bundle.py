@@ -1,16 +1,22 @@
 """Bundle adjustment of a short window: the poses of its frames and the inverse depths of the first frame's
-corners, by ``scipy.optimize.least_squares`` with an analytic sparse Jacobian.
+corners, by Levenberg–Marquardt with the inverse depths eliminated (a Schur complement), under a Huber loss.
 
 Each corner j is a ray of the first camera, f_j = K⁻¹·(u, v, 1), at inverse depth ρ_j; frame i's pose is
 T_i = (R_i, t_i), first camera → camera i. In camera i the point is seen at π(K·(R_i·f_j + ρ_j·t_i)) — the
 homogeneous form is exact for any depth, far points included. The residual is that minus the tracked corner,
-in pixels, under a Huber loss. The first camera is fixed; the scale of the window is fixed by a stiff residual
-that holds the mean inverse depth at 1 (the depth map's own normalisation).
+in pixels, under a Huber loss. The first camera is fixed.
 
-Each call of ``least_squares`` optimises small updates (υ, ω) of every pose, T_i ← (exp(ω)·R_i, exp(ω)·t_i + υ),
-around the poses of the previous call (the Jacobian of ω is exact at the linearisation point), and the inverse
-depths directly; a few calls re-linearise. Corners whose largest reprojection error stays above ``outlier_px``
+The solver (``solver="schur"``, the default) takes Levenberg–Marquardt steps on the normal equations, iteratively
+reweighted for the Huber loss: each corner has one unknown, so the inverse depths are eliminated and the reduced
+system is 6k × 6k for k frames. Each step updates every pose by (υ, ω), T_i ← (exp(ω)·R_i, exp(ω)·t_i + υ), and
+the inverse depths directly. The scale of the window is left to the damping during the iterations and fixed
+exactly afterwards: the mean inverse depth of the kept corners is 1 (the depth map's own normalisation), a change of
+gauge that leaves every residual as it is. Corners whose largest reprojection error stays above ``outlier_px``
 are dropped and the window is adjusted again without them.
+
+``solver="scipy"`` is the reference the tests hold the default to: ``scipy.optimize.least_squares`` (trust region,
+analytic sparse Jacobian) on the same residuals and loss, with a stiff residual that holds the mean inverse depth
+at 1, re-linearised a few times around the poses of the previous call (about 10× slower).
 """
 
 from __future__ import annotations
@@ -28,7 +34,8 @@ from dmtrack.initialization.twoview import bearings
 __all__ = ["BundleResult", "bundle_adjust"]
 
 SCALE_WEIGHT = 100.0
-"""Weight of the residual mean(ρ) − 1 (pixels per unit of inverse depth): stiff, it only fixes the gauge."""
+"""Weight of the residual mean(ρ) − 1 of the scipy reference (pixels per unit of inverse depth): stiff, it only
+fixes the gauge."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +93,7 @@ def bundle_adjust(
     huber_px, outlier_px : float
         Huber threshold and outlier threshold of the reprojection error, pixels.
     rounds, max_nfev : int
-        Re-linearisations, and function evaluations per ``least_squares`` call (``solver="scipy"``).
+        Re-linearisations, and function evaluations per ``least_squares`` call (``solver="scipy"`` only).
     solver : str
         ``"schur"`` (default): Levenberg–Marquardt on the normal equations with the points eliminated (each has
         one unknown, so the reduced system is 6k × 6k), iteratively reweighted for the Huber loss. ``"scipy"``:

@@ -3,27 +3,34 @@
 :class:`GeometricInitializer` is fed the run's frames one by one, from its first (:meth:`~GeometricInitializer.add`)
 and answers, after each, whether it has finished:
 
-1. the first frame's corners are tracked into every new frame (:class:`~dmtrack.initialization.tracks.CornerTracks`);
-2. from frame ``min_frames`` on, every quarter of the window so far (8, 10, 12, 15, 18, 22, … by default), the two-view
-   geometry of the first and the newest frame is fitted (:func:`~dmtrack.initialization.twoview.two_view`). The
-   window is tried once the corners' median parallax reaches ``min_parallax_deg``, a homography no longer explains
-   more than ``max_homography_fraction`` of them, and at least ``min_inliers`` agree;
+1. the corners of a *reference* frame (the run's first, at first) are tracked into every new frame
+   (:class:`~dmtrack.initialization.tracks.CornerTracks`); when fewer than ``redetect_below`` are left (forward
+   motion carries them out of the image), new corners of the newest frame are followed back to the reference;
+2. from ``min_frames`` after the reference on, every quarter of the window so far (8, 10, 12, 15, 18, 22, … by
+   default), the two-view geometry of the reference and the newest frame is fitted
+   (:func:`~dmtrack.initialization.twoview.two_view`). The window is tried once the corners' median parallax reaches
+   ``min_parallax_deg``, a homography no longer explains more than ``max_homography_fraction`` of them, and enough
+   corners agree: ``min_inliers``, or ``min_spread_inliers`` when they span the image (``spread_cells``);
 3. a try: the poses of up to ``map_frames`` frames of the window (evenly spaced, the newest included) and the
    corners' inverse depths are bundle-adjusted (:func:`~dmtrack.initialization.bundle.bundle_adjust`); the try
-   holds when ``min_inliers`` corners survive, their median reprojection error is at most
-   ``max_reprojection_px`` and the adjusted parallax still reaches ``min_parallax_deg``;
+   holds when enough corners survive, their median reprojection error is at most ``max_reprojection_px`` and the
+   adjusted parallax still reaches ``min_parallax_deg``;
 4. a try that holds is accepted only when the next one confirms it: both windows agree on the newest frame of the
    earlier within ``agree_rot_deg`` of rotation and ``agree_tdir_deg`` in the direction of motion (a short
    baseline can fit a wrong motion about as well as the right one; a wrong one does not last);
 5. then the first map is made from the later window's frames
    (:func:`~dmtrack.initialization.first_map.make_first_map`) and the start has *accepted*; the odometry begins at
-   the first frame with that map and tracks every frame, the window's included.
+   the reference frame with that map and tracks every frame from there, the window's included.
 
-It *refuses* — with a message saying what was missing — when the window reaches ``max_frames`` frames, or when
-too few corners are left to track (or were found). The caller then decides what to do (``dmtrack.track`` starts
-from LSD-SLAM's random map and records the refusal in ``metrics.json``).
+It tells **waiting** (too little parallax yet, or a motion a homography still explains: the camera has not moved
+enough — more frames will do) from **cannot be fitted from this reference** (too few corners left even after new
+ones were followed back; ``max_unfit`` tries in a row whose bundle adjustment failed or whose windows disagreed): the
+latter starts again from a later reference frame, the newest (DSO's coarse initialiser likewise begins anew). Frames
+before the reference the start accepted get no pose from the odometry. It *refuses* — with a message saying what was
+missing — only when ``max_frames`` frames have passed since the run's first without an accepted window; the caller
+then starts from LSD-SLAM's random map and records the refusal in ``metrics.json``.
 
-Deterministic: OpenCV's RANSAC seeds its own generator, the rest is plain arithmetic.
+Deterministic: OpenCV's MAGSAC++ (and RANSAC) seed their own generators, the rest is plain arithmetic.
 """
 
 from __future__ import annotations
@@ -39,7 +46,7 @@ from dmtrack.geometry import exact
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.initialization.bundle import bundle_adjust
 from dmtrack.initialization.first_map import grey_frame, make_first_map
-from dmtrack.initialization.tracks import CornerTracks
+from dmtrack.initialization.tracks import CornerTracks, grid_coverage
 from dmtrack.initialization.twoview import TwoView, ray_parallax_deg, two_view
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.initial_map import InitialMap
@@ -83,13 +90,16 @@ class GeometricInitializer:
         self._images: list[np.ndarray] = []
         self._indices: list[int] = []
         self._timestamps: list[float] = []
+        self._ref = 0  # position of the reference frame in _images
         self._next_check = self.config.initializer.min_frames
         self._last: TwoView | None = None
         self._best_parallax = 0.0
         self._last_try: str | None = None
         self._prev: tuple[list[int], np.ndarray] | None = None  # the last try's window and its adjusted poses
+        self._unfit = 0  # tries in a row that could not be fitted from this reference
+        self._last_redetect = -1
         self._seconds = 0.0
-        self.info: dict[str, Any] = {"checks": 0, "tries": 0}
+        self.info: dict[str, Any] = {"checks": 0, "tries": 0, "references": [], "redetected": 0}
 
     @property
     def done(self) -> bool:
@@ -118,45 +128,85 @@ class GeometricInitializer:
         self._images.append(image)
         self._indices.append(index)
         self._timestamps.append(timestamp)
-        if self._tracks is None:
-            self._tracks = CornerTracks(
-                image, ic.corners, ic.corner_distance, ic.klt_window, ic.klt_levels, ic.max_fb_error
-            )
-            if len(self._tracks.first) < ic.min_inliers:
-                self.refuse(f"frame {index} has {len(self._tracks.first)} corners, the start needs "
-                             f"{ic.min_inliers}: too little texture")
-            return
-        alive = self._tracks.add(image)
         k = len(self._indices) - 1
-        if alive < ic.min_inliers:
-            self.refuse(f"only {alive} of the first frame's {len(self._tracks.first)} corners could be followed to "
-                         f"frame {index} (the start needs {ic.min_inliers}): {self.motion_summary()}")
-            return
-        if k >= self._next_check:
-            self._next_check = k + max(1, k // 4)
-            if self._check(k) and self._try(k):
-                return
+        if self._tracks is None:
+            self._new_reference(k)
+        else:
+            self._follow(k)
+            if k >= self._next_check and self._tracks is not None:
+                self._next_check = k + max(1, (k - self._ref) // 4)
+                if self._check(k) and self._try(k):
+                    return
         if k >= ic.max_frames:
             self.refuse(f"no window of frames {self._indices[0]}–{index} gave the start what it needs: "
                          f"{self.motion_summary()}")
+
+    def _new_reference(self, k: int) -> None:
+        """Start again from frame k: its corners, a fresh window (the frames before it are no longer used)."""
+        ic = self.config.initializer
+        self._tracks = CornerTracks(
+            self._images[k], ic.corners, ic.corner_distance, ic.klt_window, ic.klt_levels, ic.max_fb_error
+        )
+        self._ref = k
+        self._next_check = k + ic.min_frames
+        self._prev = None
+        self._unfit = 0
+        self._last_redetect = k
+        self.info["references"].append(self._indices[k])
+        for i in range(k):  # the start no longer needs the frames before its reference
+            self._images[i] = None  # type: ignore[call-overload]
+
+    def _follow(self, k: int) -> None:
+        """Follow the tracks into frame k; new corners when they run low; a new reference when they are too few."""
+        ic = self.config.initializer
+        assert self._tracks is not None
+        alive = self._tracks.add(self._images[k])
+        if alive < ic.redetect_below and k - self._last_redetect >= 2:
+            self._last_redetect = k
+            self.info["redetected"] += self._tracks.redetect()
+        if not self._enough(self._tracks.current()):
+            self._last_try = (f"only {self._tracks.n_alive} corners of frame {self._indices[self._ref]} could be "
+                              f"followed to frame {self._indices[k]}")  # fmt: skip
+            self._new_reference(k)
+
+    def _enough(self, points: np.ndarray) -> bool:
+        """Whether corners at ``points`` (n, 2) are enough: ``min_inliers`` of them, or ``min_spread_inliers`` that
+        span the image (``spread_cells`` of its 3 × 3 cells hold 3 or more)."""
+        ic = self.config.initializer
+        n = len(points)
+        if n >= ic.min_inliers:
+            return True
+        cover = grid_coverage(points, self.camera.width, self.camera.height)
+        return n >= ic.min_spread_inliers and cover * 9 >= ic.spread_cells - 1e-9
+
+    def _unfit_try(self, k: int, why: str) -> bool:
+        """Record a try that could not be fitted; after ``max_unfit`` in a row, start again from frame k."""
+        self._last_try = why
+        self._unfit += 1
+        if self._unfit >= self.config.initializer.max_unfit:
+            self._last_try = f"{why}; {self._unfit} tries from frame {self._indices[self._ref]} could not be fitted"
+            self._new_reference(k)
+        return False
 
     def _check(self, k: int) -> bool:
         """Fit the two-view geometry of frames 0 and k; whether the window is worth a try."""
         ic = self.config.initializer
         assert self._tracks is not None
         alive = np.flatnonzero(self._tracks.alive)
-        tv = two_view(self._tracks.first[alive], self._tracks.observations(k)[alive], self._K, ic.ransac_px,
-                      ic.min_inliers)
+        obs = self._tracks.observations(k - self._ref)
+        tv = two_view(self._tracks.first[alive], obs[alive], self._K, ic.ransac_px, ic.min_spread_inliers,
+                      ic.essential)
         self.info["checks"] += 1
         if tv is None:
             return False
-        tv = TwoView(tv.R, tv.t, alive[tv.inliers], tv.idepth, tv.parallax_deg, tv.homography_fraction)
+        tv = TwoView(tv.R, tv.t, alive[tv.inliers], tv.idepth, tv.parallax_deg, tv.homography_fraction,
+                     tv.homography_stretch)
         self._last = tv
         self._best_parallax = max(self._best_parallax, tv.parallax_deg)
         return (
             tv.parallax_deg >= ic.min_parallax_deg
-            and tv.homography_fraction <= ic.max_homography_fraction
-            and len(tv.inliers) >= ic.min_inliers
+            and (tv.homography_fraction <= ic.max_homography_fraction or tv.homography_stretch >= ic.min_plane_stretch)
+            and self._enough(obs[tv.inliers])
         )
 
     def _try(self, k: int) -> bool:
@@ -165,7 +215,8 @@ class GeometricInitializer:
         tv = self._last
         assert tv is not None and self._tracks is not None
         self.info["tries"] += 1
-        window = _window(k, ic.map_frames, None if self._prev is None else self._prev[0][-1])
+        r = self._ref
+        window = [r + i for i in _window(k - r, ic.map_frames, None if self._prev is None else self._prev[0][-1] - r)]
         idx = tv.inliers
         rho = np.array(tv.idepth, np.float64)
         good = np.isfinite(rho)
@@ -178,10 +229,10 @@ class GeometricInitializer:
         slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([np.eye(3), tv.R])))
         poses = np.tile(np.eye(4), (len(window), 1, 1))
         for n, i in enumerate(window):
-            poses[n, :3, :3] = slerp(i / k).as_matrix()
-            poses[n, :3, 3] = tv.t * s * (i / k)
+            poses[n, :3, :3] = slerp((i - r) / (k - r)).as_matrix()
+            poses[n, :3, 3] = tv.t * s * ((i - r) / (k - r))
         first = self._tracks.first[idx]
-        obs = [self._tracks.observations(i)[idx] for i in window]
+        obs = [self._tracks.observations(i - r)[idx] for i in window]
         ba = bundle_adjust(self._K, first, obs, poses, rho)
         n_kept = int(np.count_nonzero(ba.kept))
         T = ba.poses[-1]
@@ -191,16 +242,15 @@ class GeometricInitializer:
             ba_corners=n_kept, ba_error_px=round(ba.median_error_px, 4), parallax_deg=round(par_med, 4),
             homography_fraction=round(tv.homography_fraction, 4),
         )  # fmt: skip
-        if n_kept < ic.min_inliers:
-            self._last_try = f"the bundle adjustment kept {n_kept} corners"
-            return False
+        if not self._enough(first[ba.kept]):
+            return self._unfit_try(k, f"the bundle adjustment kept {n_kept} corners")
         if not ba.median_error_px <= ic.max_reprojection_px:
-            self._last_try = f"the bundle adjustment left {ba.median_error_px:.2f} px"
-            return False
+            return self._unfit_try(k, f"the bundle adjustment left {ba.median_error_px:.2f} px")
         if par_med < ic.min_parallax_deg:
-            self._last_try = f"the adjusted parallax is {par_med:.2f}°"
+            self._last_try = f"the adjusted parallax is {par_med:.2f}°"  # waiting: not moved enough yet
             return False
         prev, self._prev = self._prev, (window, ba.poses.copy())
+        self._unfit = 0
         if prev is None:
             self._last_try = "a first window held; the start waits for a later one to confirm it"
             return False
@@ -208,19 +258,19 @@ class GeometricInitializer:
         rot, tdir = _disagreement(prev[1][-1], ba.poses[window.index(last)])
         self.info.update(agreement_rot_deg=round(rot, 4), agreement_tdir_deg=round(tdir, 3))
         if rot > ic.agree_rot_deg or tdir > ic.agree_tdir_deg:
-            self._last_try = (f"two windows disagreed on frame {self._indices[last]} by {rot:.2f}° in rotation and "
-                              f"{tdir:.1f}° in the direction of motion")
-            return False
+            return self._unfit_try(k, f"two windows disagreed on frame {self._indices[last]} by {rot:.2f}° in "
+                                      f"rotation and {tdir:.1f}° in the direction of motion")
         self._accept(window, list(ba.poses), k)  # the later, confirmed window makes the map
         return True
 
     def _accept(self, window: list[int], poses: list[np.ndarray], k: int) -> None:
         levels = self.config.pyramid_levels
-        kf = grey_frame(self._indices[0], self._timestamps[0], self._images[0], self.camera, levels)
+        r = self._ref
+        kf = grey_frame(self._indices[r], self._timestamps[r], self._images[r], self.camera, levels)
         frames = [grey_frame(self._indices[i], self._timestamps[i], self._images[i], self.camera, levels)
                   for i in window]
         m, _ = make_first_map(kf, frames, poses, self.config, parallel=self.parallel)
-        self.info.update(accepted_frame=self._indices[k],
+        self.info.update(accepted_frame=self._indices[k], reference_frame=self._indices[r],
                          window_frames=[self._indices[i] for i in window], map_pixels=m.n_valid)
         self.initial_map = InitialMap(
             m.frame_index, self._indices[k], m.valid, m.idepth, m.idepth_var, m.idepth_smoothed,

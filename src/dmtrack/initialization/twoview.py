@@ -17,10 +17,13 @@ import numpy as np
 
 from dmtrack.geometry import exact
 
-__all__ = ["TwoView", "bearings", "ray_parallax_deg", "two_view"]
+__all__ = ["ESSENTIAL_METHODS", "TwoView", "bearings", "homography_stretch", "ray_parallax_deg", "two_view"]
 
 HOMOGRAPHY_PX = 2.0
 """Tolerance of the homography test, pixels."""
+
+#: ``method`` of :func:`two_view`: OpenCV's robust estimator of the essential matrix.
+ESSENTIAL_METHODS = {"ransac": cv2.RANSAC, "magsac": cv2.USAC_MAGSAC, "accurate": cv2.USAC_ACCURATE}
 
 
 @dataclass(frozen=True)
@@ -39,6 +42,9 @@ class TwoView:
         Median parallax angle of the inliers, degrees.
     homography_fraction : float
         Fraction of the inliers a homography explains within :data:`HOMOGRAPHY_PX`.
+    homography_stretch : float
+        How far that homography is from a rotation: σ₁/σ₃ − 1 of K⁻¹HK (0 for a rotation about the camera centre,
+        which maps rays without changing their angles; a plane seen by a translating camera stretches them).
     """
 
     R: np.ndarray
@@ -47,10 +53,12 @@ class TwoView:
     idepth: np.ndarray
     parallax_deg: float
     homography_fraction: float
+    homography_stretch: float = 0.0
 
 
 def two_view(
-    first: np.ndarray, later: np.ndarray, K: np.ndarray, ransac_px: float = 1.0, min_points: int = 8
+    first: np.ndarray, later: np.ndarray, K: np.ndarray, ransac_px: float = 1.0, min_points: int = 8,
+    method: str = "ransac",
 ) -> TwoView | None:
     """The two-view geometry of matched points ``first`` ↔ ``later`` ((n, 2) pixels), or None when it fails.
 
@@ -62,13 +70,18 @@ def two_view(
         RANSAC threshold of the essential matrix, pixels.
     min_points : int
         Fewest points to try (and fewest inliers to return a result).
+    method : str
+        The robust estimator of the essential matrix (:data:`ESSENTIAL_METHODS`): ``"ransac"`` (``cv2.RANSAC``),
+        ``"magsac"`` (``cv2.USAC_MAGSAC``) or ``"accurate"`` (``cv2.USAC_ACCURATE``).
     """
     a = np.ascontiguousarray(first, np.float64)
     b = np.ascontiguousarray(later, np.float64)
     if len(a) < max(min_points, 8):
         return None
     K = np.asarray(K, np.float64)
-    E, mask = cv2.findEssentialMat(a, b, K, cv2.RANSAC, 0.999, float(ransac_px))
+    if method not in ESSENTIAL_METHODS:
+        raise ValueError(f"essential-matrix method must be one of {', '.join(ESSENTIAL_METHODS)}, got {method!r}")
+    E, mask = cv2.findEssentialMat(a, b, K, ESSENTIAL_METHODS[method], 0.999, float(ransac_px))
     if E is None or E.shape != (3, 3) or mask is None:
         return None  # no model, or several stacked: degenerate
     # distanceThresh: keep far points (small parallax) as inliers; they still fix the rotation
@@ -89,7 +102,42 @@ def two_view(
         idepth=idepth,
         parallax_deg=float(np.median(par[finite])) if finite.any() else 0.0,
         homography_fraction=h_frac,
+        homography_stretch=0.0 if H is None else homography_stretch(H, K),
     )
+
+
+def homography_stretch(H: np.ndarray, K: np.ndarray) -> float:
+    """σ₁/σ₃ − 1 of the normalised homography K⁻¹HK: 0 for a pure rotation, more for a translating camera in front of
+    a plane. The singular values come from the eigenvalues of the symmetric 3×3 matrix MᵀM in closed form
+    (trigonometric solution, no LAPACK: the same bits on every CPU)."""
+    Kinv = np.array([[1.0 / K[0, 0], 0.0, -K[0, 2] / K[0, 0]], [0.0, 1.0 / K[1, 1], -K[1, 2] / K[1, 1]],
+                     [0.0, 0.0, 1.0]])  # fmt: skip
+    M = exact.matmul(exact.matmul(Kinv, np.asarray(H, np.float64)), np.asarray(K, np.float64))
+    A = exact.matmul(M.T, M)
+    lam = _symmetric_eigenvalues(A)
+    if not lam[0] > 0:
+        return float("inf")
+    return float(np.sqrt(lam[2] / lam[0])) - 1.0
+
+
+def _symmetric_eigenvalues(A: np.ndarray) -> tuple[float, float, float]:
+    """Eigenvalues, increasing, of a symmetric 3×3 matrix (Smith's closed form)."""
+    a = [[float(x) for x in row] for row in A]
+    p1 = a[0][1] ** 2 + a[0][2] ** 2 + a[1][2] ** 2
+    q = (a[0][0] + a[1][1] + a[2][2]) / 3.0
+    if p1 == 0.0:
+        return tuple(sorted((a[0][0], a[1][1], a[2][2])))  # type: ignore[return-value]
+    p2 = (a[0][0] - q) ** 2 + (a[1][1] - q) ** 2 + (a[2][2] - q) ** 2 + 2.0 * p1
+    p = (p2 / 6.0) ** 0.5
+    b = [[(a[i][j] - (q if i == j else 0.0)) / p for j in range(3)] for i in range(3)]
+    det = (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1]) - b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0])
+           + b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]))  # fmt: skip
+    r = min(1.0, max(-1.0, det / 2.0))
+    phi = float(np.arccos(r)) / 3.0
+    e1 = q + 2.0 * p * float(np.cos(phi))
+    e3 = q + 2.0 * p * float(np.cos(phi + 2.0 * np.pi / 3.0))
+    e2 = 3.0 * q - e1 - e3
+    return tuple(sorted((e1, e2, e3)))  # type: ignore[return-value]
 
 
 def bearings(uv: np.ndarray, K: np.ndarray) -> np.ndarray:

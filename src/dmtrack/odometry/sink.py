@@ -15,7 +15,10 @@ A sink may also have the **optional** method ``on_frame_info(info)``: it is then
 the frame's image and to the current keyframe's inverse depth, for viewers. The odometry looks the method up once,
 when it is created: a sink without it costs nothing and changes nothing. Likewise the optional
 ``on_initial_map(snapshot)`` is called once, when the first keyframe is created, with a :class:`KeyframeSnapshot`
-of its map as the start left it (random, geometric or ground truth), before any frame was mapped into it.
+of its map as the start left it (random, geometric or ground truth), before any frame was mapped into it. And the
+optional ``on_relocalised(frame_index, timestamp, keyframe_id, lost_since, T_wc)`` is called when a run that went on
+after a loss finds the camera again (after that frame's ``on_frame``): the frame, the keyframe it was found on, the
+frame at which tracking had been lost, and the pose found.
 
 The protocol and the snapshot type belong to the odometry (it calls them); the sinks themselves — the run-folder
 writer, :class:`~dmtrack.outputs.memory.MemorySink`, :class:`~dmtrack.outputs.memory.MultiSink` — live in
@@ -54,6 +57,12 @@ class KeyframeSnapshot:
         The level-0 :class:`~dmtrack.geometry.camera.PinholeCamera`.
     n_updates : int
         Frames that were mapped into this keyframe.
+    parent_id : int | None
+        The keyframe whose map this one's was propagated from (the one before it, or after a relocalisation the
+        keyframe the camera was found on); None for the first keyframe of a segment.
+    segment : int
+        0, or the number of times the odometry started a new map after a loss it could not recover from
+        (keyframes of different segments share no frame of reference).
     """
 
     keyframe_id: int
@@ -66,6 +75,8 @@ class KeyframeSnapshot:
     image: np.ndarray | None
     camera: Any
     n_updates: int = 0
+    parent_id: int | None = None
+    segment: int = 0
     _points: list[Any] = field(default_factory=list, init=False, repr=False)  # the last points_world result
 
     @property

@@ -52,37 +52,39 @@ the world unit is the first keyframe's (mean inverse depth 1), up to the drift o
 from __future__ import annotations
 
 import time
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
 from dmtrack.errors import InputError
-from dmtrack.geometry.exact import dot, matmul
+from dmtrack.geometry.exact import matmul
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.depthmap import DepthMap
 from dmtrack.odometry.frame import Frame, build_frame
+from dmtrack.odometry.initial_map import InitialMap
+from dmtrack.odometry.losses import LossHandling
+from dmtrack.odometry.records import (
+    FrameResult,
+    KeyframeRecord,
+    StoredKeyframe,
+    VOResult,
+    _inv_se3,
+    _se3_part,
+    _sim3,
+    keyframe_score,
+)
+from dmtrack.odometry.relocalisation_quality import relocalisation_failure
 from dmtrack.odometry.sink import FrameInfo, KeyframeSnapshot, OutputSink
 from dmtrack.odometry.tracker import Tracker, TrackingReference, TrackResult
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.geometry.camera import PinholeCamera
-    from dmtrack.odometry.initial_map import InitialMap
 
-__all__ = ["FrameResult", "KeyframeRecord", "VOResult", "VisualOdometry", "keyframe_score"]
-
-
-def keyframe_score(T_fk: np.ndarray, mean_idepth: float, point_usage: float, dist_w: float, usage_w: float) -> float:
-    """LSD-SLAM's keyframe score (|t·meanIdepth|²·dist_w² + (1 − usage)²·usage_w²).
-
-    ``t`` is the frame's position in keyframe coordinates (translation of T_fk⁻¹).
-    """
-    R = T_fk[:3, :3]
-    t_kf = -matmul(R.T, T_fk[:3, 3])
-    d = t_kf * mean_idepth
-    return dot(d, d) * dist_w * dist_w + (1.0 - point_usage) ** 2 * usage_w * usage_w
+__all__ = ["FrameResult", "KeyframeRecord", "StoredKeyframe", "VOResult", "VisualOdometry", "keyframe_score"]
 
 
 _CONCURRENT_LAYERS = ("tbb", "omp")
@@ -100,20 +102,6 @@ def _concurrent_kernels_ok() -> bool:
         return False
 
 
-def _sim3(T: np.ndarray, s: float) -> np.ndarray:
-    """4×4 Sim(3) matrix [[s·R, t], [0, 1]] from an SE(3) matrix and a scale."""
-    S = np.array(T, dtype=np.float64, copy=True)
-    S[:3, :3] *= s
-    return S
-
-
-def _se3_part(S: np.ndarray, s: float) -> np.ndarray:
-    """SE(3) part of a Sim(3) matrix of scale ``s``: rotation without the scale, same translation."""
-    T = np.array(S, dtype=np.float64, copy=True)
-    T[:3, :3] /= s
-    return T
-
-
 def _read_only(a: np.ndarray | None) -> np.ndarray | None:
     """A read-only view of ``a`` (no copy), so that a sink cannot change the odometry's arrays."""
     if a is None:
@@ -121,95 +109,6 @@ def _read_only(a: np.ndarray | None) -> np.ndarray | None:
     v = a.view()
     v.flags.writeable = False
     return v
-
-
-def _inv_se3(T: np.ndarray) -> np.ndarray:
-    Ti = np.eye(4)
-    R = T[:3, :3]
-    Ti[:3, :3] = R.T
-    Ti[:3, 3] = -matmul(R.T, T[:3, 3])
-    return Ti
-
-
-@dataclass
-class FrameResult:
-    """What happened to one frame.
-
-    Attributes
-    ----------
-    index, timestamp
-        As passed to :meth:`VisualOdometry.process`.
-    T_wc : np.ndarray | None
-        (4, 4) SE(3) camera-to-world pose; None when the frame was not tracked.
-    tracked : bool
-        The frame has a pose (the first frame counts as tracked).
-    is_keyframe : bool
-        The frame became a keyframe.
-    keyframe_id : int
-        The keyframe it was tracked against, or the one it became; −1 if not processed.
-    lost_reason : str | None
-        Why tracking was lost (or "stopped: …" for frames after a loss with ``stop_on_loss``).
-    track : TrackResult | None
-        The tracker's full result (None for the first frame and for skipped frames).
-    pyramid_ms, tracking_ms, mapping_ms : float
-        Wall time of the feature pyramid, of tracking (reference rebuild + LM) and of mapping (depth update or
-        keyframe creation / initialisation), milliseconds.
-    reference_ms : float
-        The part of ``tracking_ms`` spent (re)building the tracking reference (0 when it was reused).
-    """
-
-    index: int
-    timestamp: float
-    T_wc: np.ndarray | None
-    tracked: bool
-    is_keyframe: bool
-    keyframe_id: int
-    lost_reason: str | None = None
-    track: TrackResult | None = None
-    pyramid_ms: float = 0.0
-    tracking_ms: float = 0.0
-    mapping_ms: float = 0.0
-    reference_ms: float = 0.0
-
-
-@dataclass
-class KeyframeRecord:
-    """A keyframe: id, the frame it came from, SE(3) pose T_wc, Sim(3) scale and its parent's ρ."""
-
-    keyframe_id: int
-    frame_index: int
-    timestamp: float
-    T_wc: np.ndarray
-    scale: float
-    scale_from_parent: float
-
-
-@dataclass
-class VOResult:
-    """Summary of a run (see :meth:`VisualOdometry.result`).
-
-    Attributes
-    ----------
-    indices : (n,) int64 — tracked frame indices, in processing order.
-    timestamps : (n,) float64.
-    poses : (n, 4, 4) float64 — SE(3) T_wc of the tracked frames.
-    keyframes : list[KeyframeRecord].
-    lost : list[(frame index, reason)].
-    lost_at : first lost frame index, or None.
-    total_frames : frames passed to ``process`` (including lost and skipped ones).
-    tracked_frames : frames with a pose.
-    timings_ms : mean per processed frame of ``pyramid``, ``tracking``, ``mapping`` and ``total``.
-    """
-
-    indices: np.ndarray
-    timestamps: np.ndarray
-    poses: np.ndarray
-    keyframes: list[KeyframeRecord]
-    lost: list[tuple[int, str]]
-    lost_at: int | None
-    total_frames: int
-    tracked_frames: int
-    timings_ms: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -230,7 +129,7 @@ class _MapSnapshot:
         return cls(frame, idepth, var, dm.n_updates, mean_idepth)
 
 
-class VisualOdometry:
+class VisualOdometry(LossHandling):
     """Deterministic single-process semi-dense VO over N-channel feature maps.
 
     Parameters
@@ -292,6 +191,7 @@ class VisualOdometry:
         self.sink = sink
         self._on_frame_info = getattr(sink, "on_frame_info", None)  # optional sink method (viewers)
         self._on_initial_map = getattr(sink, "on_initial_map", None)  # optional: the first keyframe's map at start
+        self._on_relocalised = getattr(sink, "on_relocalised", None)  # optional: where a lost run was found again
         self.use_numba = use_numba
         self.parallel = bool(parallel)
         self.tracker = Tracker(
@@ -319,6 +219,12 @@ class VisualOdometry:
         self._poses: list[np.ndarray] = []
         self._keyframes: list[KeyframeRecord] = []
         self._lost: list[tuple[int, str]] = []
+        self._lost_since: int | None = None  # the frame at which tracking was lost, while it has not resumed
+        self._residuals: deque[float] = deque(maxlen=max(1, self.config.keyframe.loss_history))
+        self._before_start = 0
+        self._relocalisations: list[tuple[int, int, int]] = []
+        self._segments: list[tuple[int, int]] = []
+        self._segment = 0
         self._n_frames = 0
         self._t_sum = {"pyramid": 0.0, "tracking": 0.0, "mapping": 0.0}
 
@@ -344,6 +250,43 @@ class VisualOdometry:
         """True after a tracking loss with ``stop_on_loss`` (further frames are skipped)."""
         return self._stopped_at is not None
 
+    @property
+    def lost(self) -> bool:
+        """Tracking was lost and has not resumed: the frames since have no pose (``stop_on_loss`` off)."""
+        return self._lost_since is not None
+
+    @property
+    def lost_since(self) -> int | None:
+        """The frame at which tracking was lost, while it has not resumed."""
+        return self._lost_since
+
+    @property
+    def last_pose(self) -> np.ndarray | None:
+        """T_wc of the last frame with a pose (None before the first)."""
+        return self._poses[-1] if self._poses else None
+
+    @property
+    def keyframe_id(self) -> int:
+        """The current keyframe's id (−1 before the first)."""
+        return self._kf_id
+
+    def frame_of(self, index: int, timestamp: float, image: np.ndarray | None, feature_map: np.ndarray) -> Frame:
+        """The odometry's :class:`~dmtrack.odometry.frame.Frame` (feature pyramid) of a frame, as :meth:`process`
+        builds it."""
+        return build_frame(index, timestamp, image, feature_map, self.camera, self.config.pyramid_levels,
+                           self.use_numba)  # fmt: skip
+
+    def _threads(self, fn, *args):  # type: ignore[no-untyped-def]
+        """``fn(*args)`` with ``threads`` numba threads, if given."""
+        if self.threads is None:
+            return fn(*args)
+        prev = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            return fn(*args)
+        finally:
+            numba.set_num_threads(prev)
+
     # ------------------------------------------------------------------ main loop
     def process(
         self,
@@ -355,15 +298,7 @@ class VisualOdometry:
         initial_map: InitialMap | None = None,
     ) -> FrameResult:
         """Process one frame (see :meth:`_process`; runs with ``threads`` numba threads if given)."""
-        if self.threads is None:
-            result = self._process(index, timestamp, image, feature_map, depth, initial_map)
-        else:
-            prev = numba.get_num_threads()
-            numba.set_num_threads(self.threads)
-            try:
-                result = self._process(index, timestamp, image, feature_map, depth, initial_map)
-            finally:
-                numba.set_num_threads(prev)
+        result = self._threads(self._process, index, timestamp, image, feature_map, depth, initial_map)
         if self._on_frame_info is not None and result.keyframe_id >= 0:
             self._join_mapping()  # the viewer shows the map after this frame was mapped
             self._on_frame_info(self._frame_info(result, image))
@@ -439,20 +374,29 @@ class VisualOdometry:
         reason = None
         if res.diverged:
             reason = res.reason
+        elif self._lost_since is not None:  # after a loss: the quality a relocalisation needs, not that of tracking
+            reason = relocalisation_failure(res, self.config.relocalisation)
         else:
             limit = self.config.keyframe.loss_not_good_after
             if limit is not None and self.n_keyframes > limit and not res.good:
                 reason = res.reason
+            else:
+                reason = self._jumped(res)
         if reason is not None:
-            self._lost.append((int(index), str(reason)))
-            if self.sink is not None:
-                self.sink.on_lost(int(index), str(reason))
+            self._record_lost(index, reason)
             if self.config.stop_on_loss:
                 self._stopped_at = int(index)
             return FrameResult(
                 index, timestamp, None, False, False, self._kf_id, reason, res, pyramid_ms, tracking_ms,
                 reference_ms=reference_ms,
             )  # fmt: skip
+        if self._lost_since is not None:  # found again on the current keyframe
+            self._relocalisations.append((int(index), self._kf_id, self._lost_since))
+            if self._on_relocalised is not None:
+                T_wc_found = _se3_part(matmul(self._S_wk, _inv_se3(res.T_fk)), self._s_wk)
+                self._on_relocalised(int(index), float(timestamp), self._kf_id, self._lost_since, T_wc_found)
+            self._lost_since = None
+        self._residuals.append(float(res.last_residual))
 
         T_fk = res.T_fk
         T_wc = _se3_part(matmul(self._S_wk, _inv_se3(T_fk)), self._s_wk)
@@ -526,14 +470,7 @@ class VisualOdometry:
         self, frame: Frame, pyramid_ms: float, depth: np.ndarray | None = None, initial: InitialMap | None = None
     ) -> FrameResult:
         t0 = time.perf_counter()
-        dm = DepthMap(
-            self.config.depth,
-            use_numba=self.use_numba,
-            parallel=self.parallel,
-            channel_cost=self.config.channel_cost,
-            info_channels=self.config.info_channels,
-            energy_channels=self.config.energy_channels,
-        )
+        dm = self._depth_map()
         if self.config.init == "geometric":
             if initial is None:
                 raise InputError(
@@ -552,14 +489,7 @@ class VisualOdometry:
             dm.initialize_from_depth(frame, idepth)
         else:
             dm.initialize_random(frame, self.config.seed)
-        self._kf, self._dm = frame, dm
-        self._kf_id = 0
-        self._S_wk = np.eye(4)
-        self._s_wk = 1.0
-        self._T_fk_last = np.eye(4)
-        self._snaps = []
-        self._take_snapshot(self._n_frames - 1)
-        self._keyframes.append(KeyframeRecord(0, frame.index, frame.timestamp, np.eye(4), 1.0, 1.0))
+        self._start_keyframe(frame, dm, np.eye(4), 1.0, 1.0, parent=None)
         if self._on_initial_map is not None:
             self._on_initial_map(self._snapshot(0, frame, dm))
         mapping_ms = 1e3 * (time.perf_counter() - t0)
@@ -573,18 +503,8 @@ class VisualOdometry:
         old_dm, old_kf, old_id = self._dm, self._kf, self._kf_id
         new_dm = old_dm.create_keyframe(frame, res.T_fk, res.ref_pixel_was_good)  # finalises old_dm in place
         rho = float(new_dm.scale_from_parent)
-        self._S_wk = matmul(self._S_wk, _sim3(_inv_se3(res.T_fk), rho))
-        self._s_wk *= rho
-        self._kf, self._dm = frame, new_dm
-        self._kf_id = old_id + 1
-        self._T_fk_last = np.eye(4)
-        self._snaps = []
-        self._take_snapshot(self._n_frames - 1)
-        self._keyframes.append(
-            KeyframeRecord(
-                self._kf_id, frame.index, frame.timestamp, _se3_part(self._S_wk, self._s_wk), self._s_wk, rho
-            )
-        )
+        self._start_keyframe(frame, new_dm, matmul(self._S_wk, _sim3(_inv_se3(res.T_fk), rho)), self._s_wk * rho, rho,
+                             parent=old_id)  # fmt: skip
         # emitted once the odometry has moved on: if the sink raises, finish() emits the new keyframe, not this
         # one a second time
         self._emit_keyframe(old_id, old_kf, old_dm)
@@ -637,6 +557,8 @@ class VisualOdometry:
             image=kf.image,
             camera=kf.camera,
             n_updates=dm.n_updates,
+            parent_id=rec.parent_id,
+            segment=rec.segment,
         )
 
     def _frame_info(self, r: FrameResult, image: np.ndarray | None) -> FrameInfo:
@@ -719,6 +641,9 @@ class VisualOdometry:
             total_frames=self._n_frames,
             tracked_frames=len(self._indices),
             timings_ms=timings,
+            before_start=self._before_start,
+            relocalisations=list(self._relocalisations),
+            segments=list(self._segments),
         )
 
     def __repr__(self) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +56,13 @@ class MultiSink:
         self._map_sinks = [s for s in self.sinks if callable(getattr(s, "on_initial_map", None))]
         if self._map_sinks:
             self.on_initial_map = self._forward_initial_map
+        self._reloc_sinks = [s for s in self.sinks if callable(getattr(s, "on_relocalised", None))]
+        if self._reloc_sinks:
+            self.on_relocalised = self._forward_relocalised
+
+    def _forward_relocalised(self, *args: Any) -> None:
+        for s in self._reloc_sinks:
+            s.on_relocalised(*args)  # type: ignore[attr-defined]
 
     def _forward_initial_map(self, snapshot: KeyframeSnapshot) -> None:
         for s in self._map_sinks:

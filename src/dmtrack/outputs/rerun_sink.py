@@ -358,6 +358,7 @@ class RerunSink:
         self._kf_image: tuple[int, np.ndarray] | None = None  # (keyframe frame index, its downscaled image)
         self._times: list[float] = []
         self._positions: list[np.ndarray] = []
+        self._relocalisations: list[np.ndarray] = []  # positions where a lost run was found again
         self._time_kind: str | None = None
         self._camera_logged = False
         self._last_wall: float | None = None
@@ -466,6 +467,19 @@ class RerunSink:
         self.stream.log(
             "log", self.rr.TextLog(f"tracking lost at frame {frame_index}: {reason}", level=self.rr.TextLogLevel.WARN)
         )
+        self.stream.log("stats/lost", self.rr.Scalars(1.0))  # the lost span on the time line
+
+    def on_relocalised(self, frame_index: int, timestamp: float, keyframe_id: int, lost_since: int,
+                       T_wc: np.ndarray) -> None:  # fmt: skip
+        """Where a run that was lost found the camera again: a magenta point in the world, and a log line."""
+        rr = self.rr
+        self._at(frame_index, timestamp)
+        self._relocalisations.append(np.asarray(T_wc, dtype=np.float64)[:3, 3].copy())
+        self.stream.log("world/relocalisations", rr.Points3D(np.array(self._relocalisations, np.float32),
+                                                             colors=[[255, 0, 255]], radii=[-6.0]))  # fmt: skip
+        self.stream.log("stats/lost", rr.Scalars(0.0))
+        self.stream.log("log", rr.TextLog(f"relocalised at frame {frame_index} on keyframe {keyframe_id}, lost since "
+                                          f"frame {lost_since}", level=rr.TextLogLevel.INFO))  # fmt: skip
 
     def on_frame_info(self, info: FrameInfo) -> None:
         """The frame's image, the keyframe's inverse depth and the tracker's numbers."""

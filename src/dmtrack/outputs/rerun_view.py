@@ -198,6 +198,11 @@ def log_run_folder(
         if len(kfs):
             keyframes = rr.Points3D(kfs.positions, colors=[[80, 140, 255]], radii=[-4.0])
             stream.log("world/keyframes", keyframes, static=True)
+        relocs = [r["timestamp"] for r in metrics.get("relocalised") or [] if r.get("timestamp") is not None]
+        if relocs and len(traj):  # where a lost run was found again (metrics.json), magenta as in a live view
+            rows = [int(np.argmin(np.abs(traj.timestamps - t))) for t in relocs]
+            stream.log("world/relocalisations", rr.Points3D(traj.positions[rows], colors=[[255, 0, 255]],
+                                                            radii=[-6.0]), static=True)  # fmt: skip
         if points is not None:
             stream.log("world/points", rr.Points3D(points, colors=colours), static=True)
         if depth:

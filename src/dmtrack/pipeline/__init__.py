@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from dmtrack.datasets.base import Sequence
+from dmtrack.datasets.selection import select_frames
 from dmtrack.datasets.stream import live_source
 from dmtrack.errors import InputError, OutputError
 from dmtrack.io.atomic import prepare_folder, write_text
@@ -79,6 +80,7 @@ def track(
     warmup: bool = True,
     slam: Any = None,
     device: str | None = None,
+    frames: str | None = None,
 ) -> RunResult:
     """Track ``sequence`` with ``feature``.
 
@@ -110,6 +112,9 @@ def track(
     device : where a network feature given by name runs: ``"auto"`` (a CUDA GPU when PyTorch sees one, else the
         CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (:mod:`dmtrack.features.device`); None: the feature's
         default (``"auto"``). The hand-crafted features always run on the CPU.
+    frames : run on these frames of the sequence only, e.g. ``"0-349,500-699"`` (inclusive ranges, ``A:B`` half-open
+        ones, single frames; increasing): they become frames 0, 1, … of the run (``start`` and ``max_frames`` then
+        count in them). Leaving frames out makes a camera that jumps: a kidnapped camera.
 
     Raises
     ------
@@ -119,7 +124,7 @@ def track(
     result = _track(
         sequence, feature, config, start=start, max_frames=max_frames, seed=seed, init=init, sink=sink,
         format=format, intrinsics=intrinsics, r_l=r_l, progress=progress, realtime=realtime, warmup=warmup,
-        slam=slam, device=device,
+        slam=slam, device=device, frames=frames,
     )
     _raise_halt([result])
     return result
@@ -209,6 +214,7 @@ def _track_many(
     warmup: bool = True,
     slam: Any = None,
     device: str | None = None,
+    frames: str | None = None,
 ) -> list[RunResult]:
     """:func:`track_many` without re-raising ``halted_by``; a live source is closed when the run ends."""
     if not configs:
@@ -219,6 +225,7 @@ def _track_many(
         raise InputError(f"{len(sinks)} sinks for {len(configs)} configurations")
     seq = _open(sequence, format, intrinsics)
     try:
+        seq = select_frames(seq, frames)
         run = SequenceRun(seq, feature, configs, sinks, start=start, max_frames=max_frames, realtime=realtime,
                           slam=slam, device=device)
         return run.run(warmup=warmup, progress=progress, r_l=r_l)

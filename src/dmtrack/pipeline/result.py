@@ -130,6 +130,7 @@ def metrics_dict(
         "wall_s": t["wall_s"],
         "compile_s": float(result.compile_s),
         "keyframes": len(result.keyframes),
+        **_loss_metrics(result.vo),
         "start": int(start),
         "width": camera.width,
         "height": camera.height,
@@ -150,6 +151,8 @@ def metrics_dict(
     if result.slam is not None:
         m.update(_slam_metrics(result.slam))
     gt = seq.groundtruth
+    if gt is not None and len(m["segments"]) > 1:
+        _segment_metrics(m, gt, result, r_l)
     if gt is not None:
         from dmtrack.evaluation import evaluate
 
@@ -165,6 +168,50 @@ def metrics_dict(
             m.update(ate_rmse=None, rpe_rot_deg_per_m=None, rpe_trans_angle_deg_per_m=None, matched_poses=0)
             m["evaluation_error"] = str(e)
     return m
+
+
+def _loss_metrics(vo: VOResult | None) -> dict[str, Any]:
+    """``lost_frames`` (frames without a pose after tracking was lost) and ``lost_spans`` (their runs, [first, last]
+    frame), ``before_start`` (frames before the geometric start's reference frame), ``relocalisations`` and
+    ``relocalised`` (frame, timestamp, keyframe found on, frame at which it had been lost), ``segments`` (first frame
+    and first keyframe of each map the odometry began)."""
+    if vo is None:
+        return {"lost_frames": 0, "lost_spans": [], "before_start": 0, "relocalisations": 0, "relocalised": [],
+                "segments": []}  # fmt: skip
+    spans: list[list[int]] = []
+    for i, _ in vo.lost:
+        if spans and i == spans[-1][1] + 1:
+            spans[-1][1] = int(i)
+        else:
+            spans.append([int(i), int(i)])
+    time_of = dict(zip(vo.indices.tolist(), vo.timestamps.tolist(), strict=True))
+    return {
+        "lost_frames": len(vo.lost),
+        "lost_spans": spans,
+        "before_start": int(vo.before_start),
+        "relocalisations": len(vo.relocalisations),
+        "relocalised": [{"frame": f, "timestamp": time_of.get(f), "keyframe": k, "lost_since": s}
+                        for f, k, s in vo.relocalisations],  # fmt: skip
+        "segments": [{"first_frame": f, "first_keyframe": k} for f, k in vo.segments],
+    }
+
+
+def _segment_metrics(m: dict[str, Any], gt: Trajectory, result: RunResult, r_l: float) -> None:
+    """Each segment evaluated on its own (its own Sim(3) alignment): segments share no frame of reference."""
+    from dmtrack.evaluation import evaluate
+
+    firsts = [s["first_frame"] for s in m["segments"]] + [np.iinfo(np.int64).max]
+    idx = np.asarray(result.frame_indices)
+    for seg, (a, b) in zip(m["segments"], zip(firsts[:-1], firsts[1:], strict=True), strict=True):
+        rows = np.nonzero((idx >= a) & (idx < b))[0]
+        seg["tracked_frames"] = int(len(rows))
+        seg["ate_rmse"] = None
+        if len(rows) >= 3:
+            try:
+                ev = evaluate(gt, result.trajectory[rows], max_diff=0.01, r_l=r_l, align="sim3")
+                seg["ate_rmse"] = ev["ate_rmse"]
+            except (DmtrackError, ValueError):
+                pass
 
 
 def _gpu_name(feature: Any) -> str | None:

@@ -106,19 +106,30 @@ class SequenceRun:
                 raise InputError(
                     f"init='groundtruth': the depth images of {seq.name!r} are not registered to the colour camera"
                 )
+        if self.live:  # a live run goes on after a loss (and finds the camera again), as LSD-SLAM does
+            self.configs = configs = [c if not c.stop_on_loss else dataclasses.replace(c, stop_on_loss=False)
+                                      for c in configs]  # fmt: skip
         # every check above comes before the back ends' threads start
         self.slams = ([_slam_backend(feat, c, slam, s) for c, s in zip(configs, sinks, strict=True)] if slam
                       else [None] * len(configs))
+        # a run that goes on after a loss keeps its keyframes to find the camera again on them
+        self.recoveries = [None if c.stop_on_loss else _recovery(feat, c, self.camera, new_maps=not slam)
+                           for c in configs]  # fmt: skip
         # the back end first: it closes (its final optimisation, told to a viewer) before the run's sinks close
-        sinks = [s if b is None else (b if s is None else MultiSink(b, s)) for s, b in zip(sinks, self.slams,
-                                                                                           strict=True)]
+        sinks = [_sinks(r and r.store, b, s) for s, b, r in zip(sinks, self.slams, self.recoveries, strict=True)]
         self.vos = [VisualOdometry(self.camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
+        self._attach()
         self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self._first = True  # the first frame prepared is the first the odometry gets (its depth initialises it)
         self._read_frame = getattr(seq, "read_frame", None)
         self.kept: dict[int, Any] = {}  # frames read for the geometric start, given to the odometry next
         self.t_io = self.t_feat = self.compile_s = 0.0
         self.t_start = 0.0  # perf_counter() when the run's clock (wall_s, fps) starts: after the warm-up
+
+    def _attach(self) -> None:
+        for vo, r in zip(self.vos, self.recoveries, strict=True):
+            if r is not None:
+                r.attach(vo)
 
     def _stop(self, max_frames: int | None) -> int | None:
         """One past the last frame to read (None: a live source, until it ends)."""
@@ -231,6 +242,7 @@ class SequenceRun:
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
         self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink)
                     for vo, c in ((vo, run_start.config_for(vo.config)) for vo in self.vos)]
+        self._attach()
 
     def _start(self, run_start: RunStart, stops: _StopBetweenFrames) -> None:
         """Feed the run's first frames to its geometric starts (if any) until each has accepted or refused; the
@@ -250,9 +262,15 @@ class SequenceRun:
         for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames if stops.pending is None else ():
             self.t_io += dt_io
             self.t_feat += dt_feat
-            for vo, m in zip(self.vos, maps, strict=True):
-                if not vo.stopped:
-                    vo.process(i, timestamp, image, fmap, depth, m if i == self.start else None)
+            for vo, m, recovery in zip(self.vos, maps, self.recoveries, strict=True):
+                if vo.stopped:
+                    continue
+                if m is not None and vo.keyframe_id < 0 and i < m.frame_index:
+                    vo.skip(i, timestamp, f"before the start: the geometric start began at frame {m.frame_index}")
+                elif vo.lost and recovery is not None:
+                    recovery.frame(vo, i, timestamp, image, fmap)
+                else:
+                    vo.process(i, timestamp, image, fmap, depth, m if m is not None and i == m.frame_index else None)
             image = fmap = depth = None  # not kept while the next frame is awaited (157 MB for dense SIFT)
             if bar is not None:
                 bar.update(i + 1 - self.start - bar.n)
@@ -315,6 +333,18 @@ class SequenceRun:
             result.metrics = metrics_dict(result, seq, self.feature, config, self.camera, self.start, r_l)
             out.append(result)
         return out
+
+
+def _recovery(feat: Any, config: VOConfig, camera: PinholeCamera, *, new_maps: bool) -> Any:
+    from dmtrack.pipeline.recovery import Recovery  # imported only by runs that go on after a loss
+
+    return Recovery(feat, config, camera, new_maps=new_maps)
+
+
+def _sinks(*sinks: OutputSink | None) -> OutputSink | None:
+    """One sink of the given ones (in order; None are left out)."""
+    kept = [s for s in sinks if s is not None]
+    return None if not kept else kept[0] if len(kept) == 1 else MultiSink(*kept)
 
 
 def _warm_up_slam() -> float:

@@ -83,6 +83,7 @@ class SlamKeyframe:
     points: np.ndarray | None = None  # (M, 3) semi-dense points in keyframe units, for the optimised point cloud
     colours: np.ndarray | None = None  # (M, 3) uint8
     load_view: Any = field(default=None, repr=False)  # () → KeyframeView
+    parent_id: int | None = None  # the odometry's parent (the keyframe before, or where a relocalisation found it)
 
     @property
     def view(self) -> KeyframeView:
@@ -178,8 +179,8 @@ class SlamBackend:
         kf = self._keyframe(snapshot)
         self.keyframes[kf.kf_id] = kf
         self.graph.add_keyframe(kf.kf_id, self._graph_pose_of_new(kf))
-        if kf.kf_id - 1 in self.keyframes:
-            self._odometry_edge(self.keyframes[kf.kf_id - 1], kf)
+        if kf.parent_id is not None and kf.parent_id in self.keyframes:
+            self._odometry_edge(self.keyframes[kf.parent_id], kf)
         self._pending_loops += self._loop_edges(kf)
         if self._pending_loops and kf.kf_id - self._last_optimised >= self.slam.optimise_every:
             self._optimise()
@@ -202,7 +203,8 @@ class SlamBackend:
         local = (np.einsum("nk,jk->nj", pts, inv.scale * np.asarray(inv.rotation.matrix())) + inv.translation)
         local = local.astype(np.float32)
         return SlamKeyframe(snap.keyframe_id, snap.frame_index, snap.timestamp, pose, snap.image, snap.idepth,
-                            snap.idepth_var, snap.camera, mean_idepth, local, np.array(col), self._view)
+                            snap.idepth_var, snap.camera, mean_idepth, local, np.array(col), self._view,
+                            snap.parent_id)
 
     def _view(self, kf: SlamKeyframe) -> KeyframeView:
         """The keyframe's pyramid and tracking reference, from the cache or built (the oldest views leave the
@@ -231,7 +233,7 @@ class SlamBackend:
     def _graph_pose_of_new(self, kf: SlamKeyframe) -> Sim3:
         """The new keyframe's pose in the graph: the odometry's relative pose to its parent, composed with the
         parent's (possibly optimised) graph pose."""
-        parent = self.keyframes.get(kf.kf_id - 1)
+        parent = None if kf.parent_id is None else self.keyframes.get(kf.parent_id)
         if parent is None or parent.kf_id not in self.graph.poses:
             return kf.vo_pose
         return self.graph.poses[parent.kf_id] @ parent.vo_pose.inverse() @ kf.vo_pose

@@ -110,12 +110,6 @@ class PoseGraph:
         self.edges.append(edge)
         return edge
 
-    def error(self, poses: dict[int, Sim3] | None = None) -> float:
-        """½ Σ rᵀ Λ r over the edges at ``poses`` (default: the graph's), r in gtsam's local coordinates."""
-        gtsam = gtsam_module()
-        graph, _ = self._factors(gtsam)
-        return float(graph.error(self._values(gtsam, poses or self.poses)))
-
     def optimise(self) -> Optimisation:
         """Levenberg–Marquardt over every keyframe but the first; the graph's poses become the optimised ones."""
         if not self.poses:

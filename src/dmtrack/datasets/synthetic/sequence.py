@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from dmtrack.errors import InputError
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.trajectory import Trajectory
 
-__all__ = ["SyntheticConfig", "SyntheticSequence", "make_trajectory"]
+__all__ = ["SyntheticConfig", "SyntheticSequence", "make_forward_trajectory", "make_trajectory"]
 
 
 # =========================================================================================== trajectory
@@ -128,6 +129,53 @@ def make_trajectory(seed: int, n_frames: int, fps: float, speed: float, scene: S
     return t, poses
 
 
+def make_forward_trajectory(
+    seed: int, n_frames: int, fps: float, speed: float, scene: Scene
+) -> tuple[np.ndarray, np.ndarray]:
+    """A driving-like trajectory: the camera moves forward along the room's long (x) axis at ``speed``, looking
+    ahead (the focus of expansion near the image centre), with a slow seeded weave of the heading (±3°), a lane
+    change-like sideways drift (±0.25 m) and a small bounce — the motion of a car's camera, for which the image
+    corners leave the picture within a few frames while the centre shows little parallax.
+
+    It starts 1 m inside the room's −x wall at eye height 1.4 m (or mid-height in a low room) and must stop 2 m
+    before the far wall (an :class:`~dmtrack.errors.InputError` otherwise: a longer room or fewer frames).
+    Returns (timestamps, poses) as :func:`make_trajectory`.
+    """
+    if n_frames < 1 or fps <= 0 or speed < 0:
+        raise InputError(f"need n_frames ≥ 1, fps > 0, speed ≥ 0 (got {n_frames}, {fps}, {speed})")
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xF0D]))
+    t = np.arange(n_frames, dtype=np.float64) / fps
+    lo, hi = scene.room_lo, scene.room_hi
+    x0 = float(lo[0]) + 1.0
+    end = x0 + speed * float(t[-1])
+    if end > float(hi[0]) - 2.0:
+        raise InputError(
+            f"a forward run of {n_frames} frames at {speed} m/s ({fps} fps) needs a room longer than "
+            f"{end + 2.0 - float(lo[0]):.1f} m in x (room_size)"
+        )
+    ph = rng.uniform(0.0, 2 * math.pi, 4)
+    fr = rng.uniform(0.8, 1.2, 4)
+    half_w = 0.5 * float(hi[1] - lo[1])
+    pos = np.zeros((n_frames, 3))
+    pos[:, 0] = x0 + speed * t
+    pos[:, 1] = 0.5 * (lo[1] + hi[1]) + min(0.25, 0.3 * half_w) * np.sin(0.35 * fr[0] * t + ph[0])
+    pos[:, 2] = min(1.4, 0.5 * float(hi[2])) + 0.02 * np.sin(2.1 * fr[1] * t + ph[1])
+    yaw = 0.05 * np.sin(0.5 * fr[2] * t + ph[2])
+    pitch = -0.03 + 0.01 * np.sin(1.3 * fr[3] * t + ph[3])
+    R = _look_rotation(yaw, pitch, np.zeros(n_frames))
+    poses = np.tile(np.eye(4), (n_frames, 1, 1))
+    poses[:, :3, :3] = R
+    poses[:, :3, 3] = pos
+    return t, poses
+
+
+#: Defaults of the settings that depend on the motion: ``orbit`` (a room) and ``forward`` (a long, empty hall).
+_MOTION_DEFAULTS = {
+    "orbit": {"room_size": (6.0, 5.0, 2.8), "n_boxes": 6, "n_planes": 2},
+    "forward": {"room_size": (30.0, 5.0, 3.0), "n_boxes": 0, "n_planes": 0},
+}
+
+
 # ======================================================================================== the sequence
 @dataclass(frozen=True)
 class SyntheticConfig:
@@ -150,8 +198,13 @@ class SyntheticConfig:
         view direction with a slow seeded wobble, so the lighting of a surface changes as the camera moves.
     noise_sigma : standard deviation of additive Gaussian sensor noise, grey levels (0..255); frame i
         always gets the same noise.
-    room_size : inside extents of the room, metres.
-    n_boxes, n_planes : objects inside the room.
+    motion : ``"orbit"`` — a smooth hand-held-like path in the middle of a room (:func:`make_trajectory`) — or
+        ``"forward"`` — driving-like forward motion down a long hall (:func:`make_forward_trajectory`; give it
+        ``fps=10``, ``speed=1`` for a car's camera in a city at that scale).
+    room_size : inside extents of the room, metres (``None``: the motion's default, 6 × 5 × 2.8 m for ``orbit``,
+        30 × 5 × 3 m for ``forward``).
+    n_boxes, n_planes : objects inside the room (``None``: 6 and 2 for ``orbit``, none in the hall of
+        ``forward``, where they would stand in the way).
     texel : texture resolution, metres.
     blur : texture pre-filter width, pixels (see :func:`render`).
     name : sequence name; ``None`` → ``"synthetic-seed<seed>"``.
@@ -171,9 +224,10 @@ class SyntheticConfig:
     global_illumination: float = 0.0
     local_illumination: float = 0.0
     noise_sigma: float = 0.0
-    room_size: tuple[float, float, float] = (6.0, 5.0, 2.8)
-    n_boxes: int = 6
-    n_planes: int = 2
+    motion: str = "orbit"
+    room_size: tuple[float, float, float] | None = None
+    n_boxes: int | None = None
+    n_planes: int | None = None
     texel: float = 0.01
     blur: float = 1.5
     name: str | None = None
@@ -196,6 +250,13 @@ class SyntheticConfig:
             raise InputError("noise_sigma and the illumination amplitudes must be ≥ 0")
         if self.local_illumination > 2.0:
             raise InputError("local_illumination must be ≤ 2 (the gain 1 − L/2 would go negative)")
+        if self.motion not in _MOTION_DEFAULTS:
+            raise InputError(f"motion must be one of {', '.join(_MOTION_DEFAULTS)}, got {self.motion!r}")
+
+    def setting(self, name: str) -> Any:
+        """``room_size``, ``n_boxes`` or ``n_planes`` as given, or the motion's default."""
+        value = getattr(self, name)
+        return _MOTION_DEFAULTS[self.motion][name] if value is None else value
 
 
 @dataclass(frozen=True)
@@ -247,12 +308,13 @@ class SyntheticSequence:
         self.scene = make_scene(
             config.seed,
             colour=config.colour,
-            room_size=tuple(float(v) for v in config.room_size),
-            n_boxes=config.n_boxes,
-            n_planes=config.n_planes,
+            room_size=tuple(float(v) for v in config.setting("room_size")),
+            n_boxes=int(config.setting("n_boxes")),
+            n_planes=int(config.setting("n_planes")),
             texel=config.texel,
         )
-        t, poses = make_trajectory(config.seed, config.n_frames, config.fps, config.speed, self.scene)
+        trajectory = make_forward_trajectory if config.motion == "forward" else make_trajectory
+        t, poses = trajectory(config.seed, config.n_frames, config.fps, config.speed, self.scene)
         # frame indices into the full trajectory (a slice keeps the original timestamps, poses and noise)
         self._frames = np.arange(config.n_frames) if _frames is None else np.asarray(_frames, np.int64)
         self._all_t = t

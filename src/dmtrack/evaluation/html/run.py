@@ -18,6 +18,7 @@ import numpy as np
 
 from dmtrack.errors import DmtrackError, InputError
 from dmtrack.evaluation.html.figures import Curve, Line, rpe_figure, topview_figure
+from dmtrack.evaluation.html.losses import has_losses, losses_section, lost_summary, relocalised_line
 from dmtrack.evaluation.html.page import Page, axis_basis_text, base_layout, colour, esc, key_value_table, thin
 from dmtrack.evaluation.html.slam import SlamTracks, is_slam_run, slam_section
 from dmtrack.evaluation.rankings import value_of
@@ -63,6 +64,8 @@ def _header(page: Page, m: dict[str, Any], info: dict[str, Any], unit: str, has_
     lost_text = "never" if lost is None else f"frame {lost}"
     if lost is not None and m.get("lost_reason"):
         lost_text += f" ({m['lost_reason']})"
+    if has_losses(m):
+        lost_text += f"; {lost_summary(m)}"
     items = [
         ("Sequence", f"{m.get('sequence', '–')} ({m.get('format') or 'format not recorded'})"),
         ("Feature", f"{m.get('feature', '–')}" + (f" ({m['channels']} channels)" if m.get("channels") else "")),
@@ -209,6 +212,9 @@ def _trajectory(page: Page, tracks: _Tracks, m: dict[str, Any], unit: str, slam:
     if tracks.keyframes is not None and len(tracks.keyframes):
         lines.append(Line(f"keyframes ({len(tracks.keyframes)})", tracks.positions(tracks.keyframes), colour(3),
                           markers=True))  # fmt: skip
+    reloc = relocalised_line(m, tracks.est, tracks.positions)
+    if reloc is not None:
+        lines.append(reloc)
     ref = tracks.gt.positions if tracks.aligned else tracks.est.positions
     basis = topview_basis(ref)
     if tracks.aligned:
@@ -341,6 +347,7 @@ def run_page(folder: Path, page: Page) -> str:
     if slam is not None:
         slam_section(page, m, unit, slam)
     _trajectory(page, tracks, m, unit, slam)
+    losses_section(page, m)
     _errors(page, tracks, m, unit)
     _depth_pictures(page, folder)
     files = [p.name for p in sorted(folder.iterdir()) if p.is_file() and not p.name.startswith(".")]

@@ -63,3 +63,19 @@ def test_without_the_jump_test_the_kidnapped_run_goes_wrong(kidnapped) -> None: 
 def test_a_run_that_stops_at_a_loss_stops_at_the_jump() -> None:
     r = dmtrack.track(SEQ, "gray", frames=FRAMES)
     assert r.metrics["lost_at"] == JUMP and r.metrics["tracked_frames"] == JUMP
+
+
+def test_bitplanes_notices_the_jump_by_its_residual_alone() -> None:
+    """Bit-Planes' residuals stay below the "good" threshold, so its good ratio is always 1 and cannot show the jump;
+    its residual alone does (``keyframe.loss_residual_jump_without_bad``), and the camera is found again with the
+    same care (a frame with no bad point is found only at a residual like the tracked frames'). Without that test
+    the run tracks on from a wrong pose."""
+    config = VOConfig(stop_on_loss=False)
+    r = dmtrack.track(SEQ, "bitplanes", config, frames=FRAMES)
+    m = r.metrics
+    assert m["lost_at"] in (JUMP, JUMP + 1) and m["relocalisations"] >= 1
+    assert m["relocalised"][0]["frame"] - JUMP <= 10 and m["tracked_frames"] >= 0.95 * m["total_frames"]
+    assert m["ate_rmse"] < 0.02
+    blind = dmtrack.track(SEQ, "bitplanes", config.with_overrides("keyframe.loss_residual_jump_without_bad=null"),
+                          frames=FRAMES)  # fmt: skip
+    assert blind.metrics["lost_frames"] == 0 and blind.metrics["ate_rmse"] > 5 * m["ate_rmse"]

@@ -259,6 +259,14 @@ class KeyframeConfig:
     passes). None: off, as in LSD-SLAM."""
     loss_jump_good_ratio: float = 0.75
     """See ``loss_residual_jump``."""
+    loss_residual_jump_without_bad: float | None = 1.7
+    """In a run that goes on after a loss (``stop_on_loss`` off) whose frames have never had a bad point — a feature
+    whose residuals stay below the "good" threshold, as Bit-Planes' always do, has a good ratio of 1 that cannot
+    show a jump — a frame counts as lost when its residual exceeds this many times the median of the last
+    ``loss_history`` tracked frames; and after a loss a frame is found again only below that residual. Bit-Planes,
+    issue 37: at most 1.38× on the tracked frames of every shared sequence, 2.08–2.22× where 7-Scenes was cut
+    (chosen there), 3.4× on a rendered kidnapping. A run that stops at a loss does not use it (a false loss would
+    end it). None: off."""
     loss_history: int = 10
     """Tracked frames whose residuals ``loss_residual_jump`` compares with (the test waits until it has half of
     them)."""

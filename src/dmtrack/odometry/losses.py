@@ -61,6 +61,7 @@ class LossHandling:
     def _jumped(self, res: TrackResult) -> str | None:
         """``keyframe.loss_residual_jump``'s test: why the frame counts as lost (None if it does not)."""
         kcfg = self.config.keyframe
+        self._bad_seen = self._bad_seen or res.bad_count > 0
         if kcfg.loss_residual_jump is None or len(self._residuals) * 2 < self._residuals.maxlen:
             return None
         n = res.good_count + res.bad_count
@@ -69,7 +70,23 @@ class LossHandling:
         if ratio < kcfg.loss_jump_good_ratio and res.last_residual > kcfg.loss_residual_jump * typical:
             return (f"tracking jumped: residual {res.last_residual:.2f}, {res.last_residual / typical:.1f}× the last "
                     f"frames' median, with {100 * ratio:.0f} % good points")  # fmt: skip
+        limit = self.residual_limit()
+        if limit is not None and res.bad_count == 0 and res.last_residual > limit:
+            return (f"tracking jumped: residual {res.last_residual:.2f}, {res.last_residual / typical:.1f}× the last "
+                    f"frames' median, with no point bad (the feature's good ratio cannot fall)")  # fmt: skip
         return None
+
+    def residual_limit(self) -> float | None:
+        """``keyframe.loss_residual_jump_without_bad`` × the median residual of the last tracked frames: the residual
+        above which a frame with no bad point counts as lost, or is not found again. None — not used — when it is
+        off, in a run that stops at a loss, before enough frames were tracked, and once any frame of the run had a
+        bad point: the feature can then show a jump in its good ratio (a clean rendered grey frame may have no bad
+        point, and a tiny residual that doubles)."""
+        factor = self.config.keyframe.loss_residual_jump_without_bad
+        if (factor is None or self.config.stop_on_loss or self._bad_seen
+                or len(self._residuals) * 2 < self._residuals.maxlen):  # fmt: skip
+            return None
+        return factor * float(np.median(np.asarray(self._residuals)))
 
     def _record_lost(self, index: int, reason: str) -> None:
         self._lost.append((int(index), str(reason)))

@@ -20,11 +20,17 @@ def good_value(res: TrackResult) -> float:
     return float(res.point_usage) * res.good_count / n if n > 0 else 0.0
 
 
-def relocalisation_failure(res: TrackResult, cfg: RelocConfig, factor: float = 1.0) -> str | None:
+def relocalisation_failure(res: TrackResult, cfg: RelocConfig, factor: float = 1.0,
+                           residual_limit: float | None = None) -> str | None:  # fmt: skip
     """Why ``res`` does not find the camera (None if it does): diverged, or ``point_usage · good ratio`` at most
-    ``factor · cfg.good_value``, or a good ratio below ``cfg.min_good_ratio``."""
+    ``factor · cfg.good_value``, or a good ratio below ``cfg.min_good_ratio``; or, when no point of it is bad (a
+    feature whose good ratio cannot fall, e.g. Bit-Planes), a residual above ``residual_limit``
+    (``keyframe.loss_residual_jump_without_bad`` × the tracked frames' median residual)."""
     if res.diverged:
         return f"relocalisation: {res.reason}"
+    if residual_limit is not None and res.bad_count == 0 and res.last_residual > residual_limit:
+        return (f"relocalisation: residual {res.last_residual:.2f} with no bad point (needs ≤ {residual_limit:.2f}, "
+                f"{res.good_count} good points)")  # fmt: skip
     n = res.good_count + res.bad_count
     ratio = res.good_count / n if n > 0 else 0.0
     value = good_value(res)

@@ -221,6 +221,7 @@ class VisualOdometry(LossHandling):
         self._lost: list[tuple[int, str]] = []
         self._lost_since: int | None = None  # the frame at which tracking was lost, while it has not resumed
         self._residuals: deque[float] = deque(maxlen=max(1, self.config.keyframe.loss_history))
+        self._bad_seen = False  # a tracked frame of the run had a bad point (LossHandling.residual_limit)
         self._before_start = 0
         self._relocalisations: list[tuple[int, int, int]] = []
         self._segments: list[tuple[int, int]] = []
@@ -375,7 +376,7 @@ class VisualOdometry(LossHandling):
         if res.diverged:
             reason = res.reason
         elif self._lost_since is not None:  # after a loss: the quality a relocalisation needs, not that of tracking
-            reason = relocalisation_failure(res, self.config.relocalisation)
+            reason = relocalisation_failure(res, self.config.relocalisation, residual_limit=self.residual_limit())
         else:
             limit = self.config.keyframe.loss_not_good_after
             if limit is not None and self.n_keyframes > limit and not res.good:

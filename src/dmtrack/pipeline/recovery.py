@@ -61,7 +61,7 @@ class Recovery:
         """A frame while ``vo`` is lost: relocalise, or count it lost (and feed a new start when it is time)."""
         assert self.relocaliser is not None
         frame = vo.frame_of(index, timestamp, image, fmap)
-        found = self.relocaliser.find(frame, vo.last_pose, vo.current_keyframe())
+        found = self.relocaliser.find(frame, vo.last_pose, vo.current_keyframe(), vo.residual_limit())
         if found is not None:
             self._start, self._start_frames = None, []
             vo.relocalise(frame, found.keyframe, found.T_fk, found.good)

@@ -104,6 +104,7 @@ class Relocaliser:
         self.tracker = tracker
         self.search = search
         self.tried: list[tuple[int, int, str, str | None]] = []  # (frame, keyframe, via, why not)
+        self._limit: float | None = None
 
     def candidates(self, frame: Frame, last_T_wc: np.ndarray | None,
                    current: tuple[Any, np.ndarray] | None) -> list[tuple[str, Any, np.ndarray]]:  # fmt: skip
@@ -134,16 +135,19 @@ class Relocaliser:
         return self.tracker.track(ref, frame, T0)
 
     def find(self, frame: Frame, last_T_wc: np.ndarray | None,
-             current: tuple[StoredKeyframe, TrackingReference, np.ndarray] | None = None) -> Found | None:  # fmt: skip
+             current: tuple[StoredKeyframe, TrackingReference, np.ndarray] | None = None,
+             residual_limit: float | None = None) -> Found | None:  # fmt: skip
         """The keyframe ``frame`` is on, or None. ``current``: the odometry's current keyframe, its tracking
-        reference and the last ``T_fk`` on it."""
+        reference and the last ``T_fk`` on it; ``residual_limit``: the largest residual of an alignment with no bad
+        point (the odometry's :meth:`~dmtrack.odometry.losses.LossHandling.residual_limit`)."""
+        self._limit = residual_limit
         cur = None
         if current is not None:
             stored, ref, T_last = current
             cur = (_Current(stored, ref), T_last)
         for via, kf, T0 in self.candidates(frame, last_T_wc, None if cur is None else (cur[0], cur[1])):
             res = self._align(kf, frame, T0)
-            why = relocalisation_failure(res, self.cfg)
+            why = relocalisation_failure(res, self.cfg, residual_limit=self._limit)
             kf_id = kf.keyframe_id if isinstance(kf, _Current) else kf.kf_id
             if why is None:
                 found = self._confirm(via, kf, res, frame)
@@ -165,7 +169,7 @@ class Relocaliser:
             T0 = pose_on_keyframe(nkf.T_wc, nkf.scale, T_wf)
             r = self._align(nkf, frame, T0)
             value = good_value(r)
-            agree = (relocalisation_failure(r, self.cfg, self.cfg.neighbour_factor) is None
+            agree = (relocalisation_failure(r, self.cfg, self.cfg.neighbour_factor, self._limit) is None
                      and _twist_norm(matmul(r.T_fk, _inv(T0))) < self.cfg.consistency)  # fmt: skip
             if agree:
                 good += 1

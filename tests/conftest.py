@@ -133,3 +133,40 @@ def sample_dir() -> Path:
     """The real 7-Scenes sample shipped in the repository (data/)."""
     assert SAMPLE.is_dir(), f"the sample sequence is missing from the repository: {SAMPLE}"
     return SAMPLE
+
+
+class RenderedRoom:
+    """The renderer's room (seed 3, 320 × 240) seen from poses around its first camera: real images and exact inverse
+    depths for the tests that build keyframes by hand (``tests/slam``, ``tests/relocalisation``)."""
+
+    def __init__(self) -> None:
+        from dmtrack.datasets.synthetic.sequence import SyntheticConfig, SyntheticSequence
+
+        self.seq = SyntheticSequence(SyntheticConfig(width=320, height=240, n_frames=1, seed=3, texel=0.02))
+        self.camera = self.seq.camera
+
+    def pose(self, yaw_deg: float = 0.0, shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Any:
+        """T_wc: the first camera turned by ``yaw_deg`` about the vertical through its centre and moved by ``shift``
+        (world axes, metres)."""
+        import numpy as np
+
+        from dmtrack.geometry.lie import SO3
+
+        T = self.seq.poses[0].copy()
+        T[:3, :3] = np.asarray(SO3.exp([0.0, 0.0, np.radians(yaw_deg)]).matrix()) @ T[:3, :3]
+        T[:3, 3] += np.asarray(shift, np.float64)
+        return T
+
+    def render(self, T_wc: Any) -> tuple[Any, Any]:
+        """(uint8 image, float32 inverse depth in 1/metres) seen from ``T_wc``."""
+        import numpy as np
+
+        from dmtrack.datasets.synthetic.renderer import render
+
+        radiance, depth = render(self.seq.scene, self.camera, T_wc, blur=self.seq.config.blur)
+        return np.clip(np.rint(radiance), 0, 255).astype(np.uint8), (1.0 / depth).astype(np.float32)
+
+
+@pytest.fixture(scope="session")
+def rendered_room() -> RenderedRoom:
+    return RenderedRoom()

@@ -6,13 +6,12 @@ renderer (seed 3, 320 × 240), aligned with the odometry's own tracker on the gr
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
-from dmtrack.datasets.synthetic.renderer import render
-from dmtrack.datasets.synthetic.sequence import SyntheticConfig, SyntheticSequence
 from dmtrack.features import get_feature
-from dmtrack.geometry.lie import SO3
 from dmtrack.odometry.config import VOConfig
 from dmtrack.odometry.frame import build_frame
 from dmtrack.odometry.relocalisation_quality import relocalisation_failure
@@ -25,20 +24,11 @@ CONFIG = VOConfig()
 
 
 class _Room:
-    def __init__(self) -> None:
-        self.seq = SyntheticSequence(SyntheticConfig(width=320, height=240, n_frames=1, seed=3, texel=0.02))
-        self.camera = self.seq.camera
+    """The rendered room (``rendered_room``) with the relocaliser's frames and kept keyframes."""
+
+    def __init__(self, base: Any) -> None:
+        self.seq, self.camera, self.pose, self.render = base.seq, base.camera, base.pose, base.render
         self.feature = get_feature("gray")
-
-    def pose(self, yaw_deg: float, shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        T = self.seq.poses[0].copy()
-        T[:3, :3] = np.asarray(SO3.exp([0.0, 0.0, np.radians(yaw_deg)]).matrix()) @ T[:3, :3]
-        T[:3, 3] += np.asarray(shift, np.float64)
-        return T
-
-    def render(self, T_wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        radiance, depth = render(self.seq.scene, self.camera, T_wc, blur=self.seq.config.blur)
-        return np.clip(np.rint(radiance), 0, 255).astype(np.uint8), (1.0 / depth).astype(np.float32)
 
     def frame(self, index: int, T_wc: np.ndarray):  # noqa: ANN201
         image, _ = self.render(T_wc)
@@ -58,8 +48,8 @@ class _Room:
 
 
 @pytest.fixture(scope="module")
-def room() -> _Room:
-    return _Room()
+def room(rendered_room: Any) -> _Room:
+    return _Room(rendered_room)
 
 
 def _relocaliser(room: _Room, store: KeyframeStore) -> Relocaliser:

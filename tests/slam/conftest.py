@@ -4,11 +4,11 @@ end's own keyframe objects (:class:`~dmtrack.slam.backend.SlamKeyframe` with a
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
-from dmtrack.datasets.synthetic.renderer import render
-from dmtrack.datasets.synthetic.sequence import SyntheticConfig, SyntheticSequence
 from dmtrack.geometry.lie import SO3, Sim3
 from dmtrack.odometry.frame import build_frame
 from dmtrack.odometry.tracker import TrackingReference
@@ -17,24 +17,11 @@ from dmtrack.slam.constraints import KeyframeView
 
 
 class Room:
-    """The renderer's room (seed 3, 320 × 240) seen from poses around its first camera."""
+    """The rendered room (``rendered_room``: seed 3, 320 × 240, poses around its first camera) with the back end's
+    keyframes."""
 
-    def __init__(self) -> None:
-        self.seq = SyntheticSequence(SyntheticConfig(width=320, height=240, n_frames=1, seed=3, texel=0.02))
-        self.camera = self.seq.camera
-
-    def pose(self, yaw_deg: float = 0.0, shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """T_wc: the first camera turned by ``yaw_deg`` about the vertical through its centre and moved by ``shift``
-        (world axes, metres)."""
-        T = self.seq.poses[0].copy()
-        T[:3, :3] = np.asarray(SO3.exp([0.0, 0.0, np.radians(yaw_deg)]).matrix()) @ T[:3, :3]
-        T[:3, 3] += np.asarray(shift, np.float64)
-        return T
-
-    def render(self, T_wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(uint8 image, float32 inverse depth in 1/metres) seen from ``T_wc``."""
-        radiance, depth = render(self.seq.scene, self.camera, T_wc, blur=self.seq.config.blur)
-        return np.clip(np.rint(radiance), 0, 255).astype(np.uint8), (1.0 / depth).astype(np.float32)
+    def __init__(self, base: Any) -> None:
+        self.seq, self.camera, self.pose, self.render = base.seq, base.camera, base.pose, base.render
 
     def keyframe(
         self, kf_id: int, T_wc: np.ndarray, norm: float = 1.0, image: np.ndarray | None = None,
@@ -61,5 +48,5 @@ class Room:
 
 
 @pytest.fixture(scope="session")
-def room() -> Room:
-    return Room()
+def room(rendered_room: Any) -> Room:
+    return Room(rendered_room)

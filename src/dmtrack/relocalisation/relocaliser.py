@@ -104,7 +104,6 @@ class Relocaliser:
         self.tracker = tracker
         self.search = search
         self.tried: list[tuple[int, int, str, str | None]] = []  # (frame, keyframe, via, why not)
-        self._limit: float | None = None
 
     def candidates(self, frame: Frame, last_T_wc: np.ndarray | None,
                    current: tuple[Any, np.ndarray] | None) -> list[tuple[str, Any, np.ndarray]]:  # fmt: skip
@@ -140,17 +139,16 @@ class Relocaliser:
         """The keyframe ``frame`` is on, or None. ``current``: the odometry's current keyframe, its tracking
         reference and the last ``T_fk`` on it; ``residual_limit``: the largest residual of an alignment with no bad
         point (the odometry's :meth:`~dmtrack.odometry.losses.LossHandling.residual_limit`)."""
-        self._limit = residual_limit
         cur = None
         if current is not None:
             stored, ref, T_last = current
             cur = (_Current(stored, ref), T_last)
         for via, kf, T0 in self.candidates(frame, last_T_wc, None if cur is None else (cur[0], cur[1])):
             res = self._align(kf, frame, T0)
-            why = relocalisation_failure(res, self.cfg, residual_limit=self._limit)
+            why = relocalisation_failure(res, self.cfg, residual_limit=residual_limit)
             kf_id = kf.keyframe_id if isinstance(kf, _Current) else kf.kf_id
             if why is None:
-                found = self._confirm(via, kf, res, frame)
+                found = self._confirm(via, kf, res, frame, residual_limit)
                 if found is not None:
                     self.tried.append((int(frame.index), kf_id, via, None))
                     return found
@@ -158,7 +156,8 @@ class Relocaliser:
             self.tried.append((int(frame.index), kf_id, via, why))
         return None
 
-    def _confirm(self, via: str, kf: Any, res: TrackResult, frame: Frame) -> Found | None:
+    def _confirm(self, via: str, kf: Any, res: TrackResult, frame: Frame,
+                 residual_limit: float | None) -> Found | None:  # fmt: skip
         """LSD-SLAM's neighbour check; the best-scoring of the keyframe and its agreeing neighbours."""
         stored = kf.stored if isinstance(kf, _Current) else kf.stored()
         kf_id = stored.keyframe_id
@@ -169,7 +168,7 @@ class Relocaliser:
             T0 = pose_on_keyframe(nkf.T_wc, nkf.scale, T_wf)
             r = self._align(nkf, frame, T0)
             value = good_value(r)
-            agree = (relocalisation_failure(r, self.cfg, self.cfg.neighbour_factor, self._limit) is None
+            agree = (relocalisation_failure(r, self.cfg, self.cfg.neighbour_factor, residual_limit) is None
                      and _twist_norm(matmul(r.T_fk, _inv(T0))) < self.cfg.consistency)  # fmt: skip
             if agree:
                 good += 1

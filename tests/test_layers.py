@@ -23,6 +23,7 @@ LAYERS: list[set[str]] = [
     {"features", "datasets"},
     {"odometry"},
     {"initialization"},
+    {"window"},
     {"slam"},
     {"relocalisation"},
     {"training"},

@@ -314,6 +314,70 @@ class RelocConfig:
             raise InputError("relocalisation.max_candidates must be ≥ 1 and new_map_after ≥ 0")
 
 
+#: Values of ``WindowConfig.leave``.
+WINDOW_LEAVE_MODES = ("fixed",)
+
+#: Values of ``WindowConfig.intrinsics_model``.
+INTRINSICS_MODELS = ("f", "f-c", "fxfy-c")
+
+
+@dataclass(frozen=True)
+class WindowConfig:
+    """The sliding window of keyframes optimised jointly (photometric bundle adjustment, :mod:`dmtrack.window`).
+
+    At every new keyframe the newest ``size`` keyframes (the one just made among them) are optimised together: the
+    poses of all but the oldest, the inverse depths of up to ``points`` sampled semi-dense points of each finished
+    keyframe (the oldest's stay fixed: they hold the monocular scale), and with ``refine_intrinsics`` the camera's
+    fx, fy, cx, cy, by Levenberg–Marquardt on the N-channel photometric residuals of each point in every other
+    keyframe of the window, the point depths eliminated by the Schur complement. ``size = 0``: no window (the
+    odometry of LSD-SLAM, byte-identical to dmtrack before the window)."""
+
+    size: int = 0
+    """Keyframes in the window (the current one included); 0 = off; DSO keeps 5–7."""
+    points: int = 600
+    """Points sampled per finished keyframe (the strongest gradient of each ``cell`` × ``cell`` cell)."""
+    cell: int = 4
+    """Cell size in pixels of the sampling level."""
+    sample_level: int = 1
+    """Pyramid level whose pixels are sampled (their level-0 position is kept)."""
+    levels: tuple[int, ...] = (2, 1)
+    """Pyramid levels optimised, coarse to fine."""
+    iterations: int = 6
+    """Levenberg–Marquardt iterations per level."""
+    huber: float = 9.0
+    """Huber threshold of a point's residual norm √(Σ_c r_c² · residual factor), grey levels (DSO: 9)."""
+    outlier: float = 40.0
+    """A residual norm above this counts as an outlier (no weight, a constant cost); grey levels."""
+    depth_prior: float = 1.0
+    """Weight of each point's inverse depth from the depth map as a prior (× 1/variance); 0: none."""
+    leave: str = "fixed"
+    """What happens to a keyframe that leaves the window: ``"fixed"`` (it keeps its last estimate and no longer
+    changes)."""
+    refine_intrinsics: bool = False
+    """Also estimate fx, fy, cx, cy from the images, with the given calibration as a prior."""
+    intrinsics_model: str = "f"
+    """Which intrinsics ``refine_intrinsics`` estimates: ``"f"`` one focal length (f_x/f_y kept at the given ratio,
+    the principal point fixed: COLMAP's default, ``refine_principal_point`` off), ``"f-c"`` also the principal point,
+    ``"fxfy-c"`` all four."""
+    intrinsics_prior: float = 0.2
+    """Standard deviation of that prior, relative to the focal length (fx, fy) and to the image size (cx, cy)."""
+
+    def __post_init__(self) -> None:
+        if self.size < 0 or self.size == 1:
+            raise InputError(f"window.size must be 0 (off) or ≥ 2, got {self.size}")
+        if self.points < 1 or self.cell < 1 or self.iterations < 0 or self.sample_level < 0:
+            raise InputError("window.points and window.cell must be ≥ 1, window.iterations and sample_level ≥ 0")
+        if not self.levels or list(self.levels) != sorted(set(self.levels), reverse=True) or min(self.levels) < 0:
+            raise InputError(f"window.levels {self.levels} must be non-negative and strictly decreasing")
+        if not (self.huber > 0 and self.outlier > 0 and self.depth_prior >= 0 and self.intrinsics_prior > 0):
+            raise InputError("window.huber, outlier and intrinsics_prior must be > 0, depth_prior ≥ 0")
+        if self.intrinsics_model not in INTRINSICS_MODELS:
+            raise InputError(f"window.intrinsics_model must be one of {', '.join(INTRINSICS_MODELS)}, "
+                             f"not {_short(self.intrinsics_model)}")  # fmt: skip
+        if self.leave not in WINDOW_LEAVE_MODES:
+            raise InputError(f"window.leave must be one of {', '.join(WINDOW_LEAVE_MODES)}, not {_short(self.leave)}")
+
+
 INIT_MODES = ("random", "geometric", "groundtruth")
 
 
@@ -425,6 +489,7 @@ class VOConfig:
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
     initializer: InitConfig = field(default_factory=InitConfig)
     relocalisation: RelocConfig = field(default_factory=RelocConfig)
+    window: WindowConfig = field(default_factory=WindowConfig)
     pyramid_levels: int = 5
     """Number of pyramid levels built per frame (0..pyramid_levels−1)."""
     seed: int = 0
@@ -490,6 +555,8 @@ class VOConfig:
             raise InputError(f"seed must be ≥ 0, got {self.seed}")
         if max(self.tracker.levels) >= self.pyramid_levels:
             raise InputError(f"tracker.levels {self.tracker.levels} need > {self.pyramid_levels} levels")
+        if self.window.size and max(*self.window.levels, self.window.sample_level) >= self.pyramid_levels:
+            raise InputError(f"window.levels {self.window.levels} need > {self.pyramid_levels} levels")
 
     # ------------------------------------------------------------------ construction helpers
     def to_dict(self) -> dict[str, Any]:
@@ -507,6 +574,7 @@ class VOConfig:
             "keyframe": KeyframeConfig,
             "initializer": InitConfig,
             "relocalisation": RelocConfig,
+            "window": WindowConfig,
         }
         kwargs: dict[str, Any] = {}
         top_fields = {f.name for f in dataclasses.fields(cls)}

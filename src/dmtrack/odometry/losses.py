@@ -182,6 +182,7 @@ class LossHandling:
         self._join_mapping()
         if self._dm is not None and self._kf is not None:
             self._dm.finalize()
+            self._window_flush()
             self._emit_keyframe(self._kf_id, self._kf, self._dm)
 
     def _depth_map(self) -> DepthMap:
@@ -190,7 +191,7 @@ class LossHandling:
                         energy_channels=self.config.energy_channels)  # fmt: skip
 
     def _start_keyframe(self, frame: Frame, dm: DepthMap, S_wk: np.ndarray, s_wk: float, rho: float,
-                        parent: int | None) -> None:  # fmt: skip
+                        parent: int | None, regular: bool = False) -> None:  # fmt: skip
         """Make ``frame`` the current keyframe with map ``dm`` and Sim(3) pose ``S_wk`` (scale ``s_wk``)."""
         if parent is None:
             self._segments.append((int(frame.index), len(self._keyframes)))
@@ -203,3 +204,5 @@ class LossHandling:
         self._take_snapshot(self._n_frames - 1)
         self._keyframes.append(KeyframeRecord(self._kf_id, frame.index, frame.timestamp, _se3_part(S_wk, s_wk), s_wk,
                                               rho, parent, self._segment))  # fmt: skip
+        if not regular:  # a map's first keyframe, or one made after a loss: a new window (the switch advances it)
+            self._window_restart()

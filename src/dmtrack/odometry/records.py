@@ -136,6 +136,8 @@ class VOResult:
     relocalisations : list[(frame index, keyframe id, frame index at which tracking had been lost)].
     segments : list[(first frame index, keyframe id)]: where the odometry began a map (the first, and every new
         map after a loss it did not recover from).
+    window : what the sliding window did (its ``stats.as_dict()``: optimisations, time, cost ratio, the intrinsics'
+        estimate), or None without a window.
     """
 
     indices: np.ndarray
@@ -150,3 +152,4 @@ class VOResult:
     before_start: int = 0
     relocalisations: list[tuple[int, int, int]] = field(default_factory=list)
     segments: list[tuple[int, int]] = field(default_factory=list)
+    window: dict[str, Any] | None = None

@@ -80,6 +80,7 @@ from dmtrack.odometry.records import (
 from dmtrack.odometry.relocalisation_quality import relocalisation_failure
 from dmtrack.odometry.sink import FrameInfo, KeyframeSnapshot, OutputSink
 from dmtrack.odometry.tracker import Tracker, TrackingReference, TrackResult
+from dmtrack.odometry.windowing import KeyframeWindow, WindowedKeyframes
 
 if TYPE_CHECKING:  # pragma: no cover
     from dmtrack.geometry.camera import PinholeCamera
@@ -129,7 +130,7 @@ class _MapSnapshot:
         return cls(frame, idepth, var, dm.n_updates, mean_idepth)
 
 
-class VisualOdometry(LossHandling):
+class VisualOdometry(LossHandling, WindowedKeyframes):
     """Deterministic single-process semi-dense VO over N-channel feature maps.
 
     Parameters
@@ -158,6 +159,9 @@ class VisualOdometry(LossHandling):
         kernels already use both, it measured no faster (grey 7-Scenes 700 frames: 60.3 against 61.6 fps).
         Needs ``map_lag`` ≥ 1; with numba's ``workqueue`` threading layer (which aborts when two threads launch
         kernels at once) it is switched off.
+    window : KeyframeWindow, optional
+        Optimises the newest keyframes jointly at each keyframe change (:mod:`dmtrack.window`,
+        :mod:`dmtrack.odometry.windowing`); None (default): LSD-SLAM's odometry, every keyframe final once made.
 
     Raises
     ------
@@ -174,6 +178,7 @@ class VisualOdometry(LossHandling):
         parallel: bool | None = None,
         threads: int | None = None,
         overlap: bool = False,
+        window: KeyframeWindow | None = None,
     ):
         if threads is not None and not 1 <= int(threads) <= numba.config.NUMBA_NUM_THREADS:
             raise InputError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS}, got {threads}")
@@ -228,6 +233,9 @@ class VisualOdometry(LossHandling):
         self._segment = 0
         self._n_frames = 0
         self._t_sum = {"pyramid": 0.0, "tracking": 0.0, "mapping": 0.0}
+        self._window = window
+        self._held = {}  # finished keyframes still in the window: id → (frame, depth map), emitted when they leave
+        self._pose_refs = []  # with a window: (keyframe id, T_fk) of every recorded pose
 
     # ------------------------------------------------------------------ properties
     @property
@@ -401,7 +409,7 @@ class VisualOdometry(LossHandling):
 
         T_fk = res.T_fk
         T_wc = _se3_part(matmul(self._S_wk, _inv_se3(T_fk)), self._s_wk)
-        self._record_pose(index, timestamp, T_wc)
+        self._record_pose(index, timestamp, T_wc, T_fk)
 
         # ---- keyframe selection and mapping
         kcfg = self.config.keyframe
@@ -413,6 +421,8 @@ class VisualOdometry(LossHandling):
         if new_kf:
             t3 = time.perf_counter()
             self._switch_keyframe(frame, res)
+            if self._window is not None:  # the frame is the new keyframe: placed by the keyframe's own pose
+                self._pose_refs[-1] = (self._kf_id, np.eye(4))
             mapping_ms = 1e3 * (time.perf_counter() - t3)
             self._t_sum["mapping"] += mapping_ms
             return FrameResult(
@@ -501,11 +511,14 @@ class VisualOdometry(LossHandling):
 
     def _switch_keyframe(self, frame: Frame, res: TrackResult) -> None:
         assert self._dm is not None and self._kf is not None
+        if self._window is not None:  # optimised with the window first; held while it is in the window
+            self._window_switch(frame, res)
+            return
         old_dm, old_kf, old_id = self._dm, self._kf, self._kf_id
         new_dm = old_dm.create_keyframe(frame, res.T_fk, res.ref_pixel_was_good)  # finalises old_dm in place
         rho = float(new_dm.scale_from_parent)
         self._start_keyframe(frame, new_dm, matmul(self._S_wk, _sim3(_inv_se3(res.T_fk), rho)), self._s_wk * rho, rho,
-                             parent=old_id)  # fmt: skip
+                             parent=old_id, regular=True)  # fmt: skip
         # emitted once the odometry has moved on: if the sink raises, finish() emits the new keyframe, not this
         # one a second time
         self._emit_keyframe(old_id, old_kf, old_dm)
@@ -590,7 +603,9 @@ class VisualOdometry(LossHandling):
             keyframe_frame_index=int(self._kf.index),
         )
 
-    def _record_pose(self, index: int, timestamp: float, T_wc: np.ndarray) -> None:
+    def _record_pose(self, index: int, timestamp: float, T_wc: np.ndarray, T_fk: np.ndarray | None = None) -> None:
+        if self._window is not None:
+            self._pose_refs.append((self._kf_id, np.eye(4) if T_fk is None else np.array(T_fk, np.float64)))
         self._indices.append(int(index))
         self._timestamps.append(float(timestamp))
         self._poses.append(T_wc)
@@ -620,6 +635,7 @@ class VisualOdometry(LossHandling):
                         self._dm.finalize()
                     finally:
                         numba.set_num_threads(prev)
+                    self._window_flush()
                     self._emit_keyframe(self._kf_id, self._kf, self._dm)
             finally:
                 if self.sink is not None:
@@ -631,7 +647,10 @@ class VisualOdometry(LossHandling):
         n = max(self._n_frames, 1)
         timings = {k: v / n for k, v in self._t_sum.items()}
         timings["total"] = sum(timings.values())
-        poses = np.array(self._poses, dtype=np.float64).reshape(-1, 4, 4)
+        if self._window is not None and self._pose_refs:
+            poses = self._refined_poses()
+        else:
+            poses = np.array(self._poses, dtype=np.float64).reshape(-1, 4, 4)
         return VOResult(
             indices=np.array(self._indices, dtype=np.int64),
             timestamps=np.array(self._timestamps, dtype=np.float64),
@@ -645,6 +664,7 @@ class VisualOdometry(LossHandling):
             before_start=self._before_start,
             relocalisations=list(self._relocalisations),
             segments=list(self._segments),
+            window=None if self._window is None else getattr(getattr(self._window, "stats", None), "as_dict", dict)(),
         )
 
     def __repr__(self) -> str:

@@ -288,6 +288,13 @@ def run_to_directory(
         except OutputError:
             if result.halted_by is None:
                 raise
+    if result.slam is None and result.vo is not None and result.vo.window is not None and len(result.trajectory):
+        # with a window the frames are placed by their keyframes' final poses: the live file had the poses known then
+        try:
+            write_tum(out / "trajectory.txt", result.trajectory)
+        except OutputError:
+            if result.halted_by is None:
+                raise
     result.metrics["points"] = files.n_points
     # an interrupted run or one whose point cloud could not be written still gets the metrics of its frames
     try:

@@ -148,6 +148,9 @@ def metrics_dict(
         "dmtrack_version": __version__,
         **kernel_target(),
     }
+    window = getattr(result.vo, "window", None)
+    if window is not None:
+        m["window"] = window
     if result.slam is not None:
         m.update(_slam_metrics(result.slam))
     gt = seq.groundtruth

@@ -117,7 +117,8 @@ class SequenceRun:
                            for c in configs]  # fmt: skip
         # the back end first: it closes (its final optimisation, told to a viewer) before the run's sinks close
         sinks = [_sinks(r and r.store, b, s) for s, b, r in zip(sinks, self.slams, self.recoveries, strict=True)]
-        self.vos = [VisualOdometry(self.camera, c, sink=s) for c, s in zip(configs, sinks, strict=True)]
+        self.vos = [VisualOdometry(self.camera, c, sink=s, window=_window(c, self.camera))
+                    for c, s in zip(configs, sinks, strict=True)]  # fmt: skip
         self._attach()
         self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self._first = True  # the first frame prepared is the first the odometry gets (its depth initialises it)
@@ -240,8 +241,9 @@ class SequenceRun:
                 starting.result()
         for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in self.configs) if r):  # in metrics
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
-        self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink)
-                    for vo, c in ((vo, run_start.config_for(vo.config)) for vo in self.vos)]
+        self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink,
+                                                             window=_window(c, self.camera))
+                    for vo, c in ((vo, run_start.config_for(vo.config)) for vo in self.vos)]  # fmt: skip
         self._attach()
 
     def _start(self, run_start: RunStart, stops: _StopBetweenFrames) -> None:
@@ -333,6 +335,15 @@ class SequenceRun:
             result.metrics = metrics_dict(result, seq, self.feature, config, self.camera, self.start, r_l)
             out.append(result)
         return out
+
+
+def _window(config: VOConfig, camera: PinholeCamera) -> Any:
+    """The sliding window of ``config.window`` (None when its size is 0)."""
+    if not config.window.size:
+        return None
+    from dmtrack.window import SlidingWindow
+
+    return SlidingWindow(config, camera)
 
 
 def _recovery(feat: Any, config: VOConfig, camera: PinholeCamera, *, new_maps: bool) -> Any:

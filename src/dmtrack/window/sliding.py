@@ -1,0 +1,153 @@
+"""The sliding window the odometry hands its keyframes to (:class:`~dmtrack.odometry.windowing.KeyframeWindow`).
+
+At each keyframe change the finished keyframe's points are sampled (:func:`~dmtrack.window.bundle.sample_points`)
+and the window — the newest ``size`` keyframes, the new current one a target only — is optimised
+(:class:`~dmtrack.window.bundle.PhotometricBundle`). Afterwards every finished keyframe's scale is the median ratio of
+its depth map's inverse depths to the optimised ones; the finished map is then propagated into the new keyframe along
+the optimised relative pose, and the new keyframe's scale is its parent's times the ρ its map was normalised with
+(:meth:`SlidingWindow.set_scale`): the next frames are tracked against that map and chained in the corrected scale.
+A keyframe that leaves the window keeps its last estimate (``leave = "fixed"``), and the oldest one left is the next
+window's anchor.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dmtrack.odometry.config import ChannelRule, VOConfig, WindowConfig
+from dmtrack.odometry.records import _inv_se3
+from dmtrack.odometry.windowing import WindowUpdate
+from dmtrack.window.bundle import BundleReport, PhotometricBundle, WindowKeyframe, sample_points
+
+__all__ = ["SlidingWindow", "WindowStats"]
+
+
+@dataclass
+class WindowStats:
+    """What the window did over a run: optimisations, their total time, the cost reduction, and the intrinsics'
+    estimates (one per optimisation, with their standard deviations) when they were refined."""
+
+    optimisations: int = 0
+    time_ms: float = 0.0
+    cost_ratio: list[float] = field(default_factory=list)
+    intrinsics: list[np.ndarray] = field(default_factory=list)
+    intrinsics_sigma: list[np.ndarray] = field(default_factory=list)
+
+    def intrinsics_estimate(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The inverse-variance weighted mean of the estimates and its standard deviation (each optimisation taken as
+        independent, which the windows' overlap makes optimistic), or None."""
+        if not self.intrinsics:
+            return None
+        K = np.array(self.intrinsics)
+        s = np.array(self.intrinsics_sigma)
+        w = np.where(np.isfinite(s) & (s > 0), 1.0 / np.where(s > 0, s * s, 1.0), 0.0)
+        tot = w.sum(0)
+        mean = np.where(tot > 0, (w * K).sum(0) / np.where(tot > 0, tot, 1.0), K[-1])
+        sigma = np.where(tot > 0, 1.0 / np.sqrt(np.where(tot > 0, tot, 1.0)), np.nan)
+        return mean, sigma
+
+    def as_dict(self) -> dict[str, Any]:
+        """The numbers for ``metrics.json``."""
+        out: dict[str, Any] = {
+            "optimisations": self.optimisations,
+            "ms_per_optimisation": self.time_ms / self.optimisations if self.optimisations else 0.0,
+            "median_cost_ratio": float(np.median(self.cost_ratio)) if self.cost_ratio else None,
+        }
+        est = self.intrinsics_estimate()
+        if est is not None:
+            names = ("fx", "fy", "cx", "cy")
+            out["intrinsics"] = {k: float(v) for k, v in zip(names, est[0], strict=True)}
+            out["intrinsics_sigma"] = {k: (None if not np.isfinite(v) else float(v))
+                                       for k, v in zip(names, est[1], strict=True)}  # fmt: skip
+        return out
+
+
+class SlidingWindow:
+    """The newest keyframes optimised jointly (see the module docstring).
+
+    Parameters
+    ----------
+    config : VOConfig
+        The odometry's configuration: its ``window`` section, and the channel rule and photometric noise the
+        residuals are weighted with (``channel_cost`` and the feature's channel statistics, the tracker's
+        ``camera_pixel_noise2``).
+    camera : PinholeCamera
+        Level-0 calibration (the intrinsics' prior and start).
+    use_numba : bool
+        Numba kernels (default) or the numpy reference.
+    """
+
+    def __init__(self, config: VOConfig, camera: Any, use_numba: bool = True):
+        self.vo_config = config
+        self.config: WindowConfig = config.window
+        self.bundle = PhotometricBundle(self.config, (camera.fx, camera.fy, camera.cx, camera.cy),
+                                        (camera.width, camera.height), 1.0, config.tracker.camera_pixel_noise2,
+                                        use_numba)  # fmt: skip
+        self._channels: int | None = None
+        self.keyframes: list[WindowKeyframe] = []
+        self.stats = WindowStats()
+        self.last_report: BundleReport | None = None
+
+    @property
+    def keyframe_ids(self) -> list[int]:
+        """Ids of the keyframes in the window, oldest first."""
+        return [kf.keyframe_id for kf in self.keyframes]
+
+    def clear(self) -> WindowUpdate:
+        """Every keyframe leaves."""
+        left = [kf.keyframe_id for kf in self.keyframes]
+        self.keyframes = []
+        return WindowUpdate({}, left)
+
+    def start(self, keyframe_id: int, frame: Any, T_wc: np.ndarray, scale: float) -> WindowUpdate:
+        """Begin anew with this keyframe."""
+        update = self.clear()
+        self.keyframes.append(WindowKeyframe(keyframe_id, frame, _inv_se3(np.asarray(T_wc, np.float64)), float(scale)))
+        return update
+
+    def advance(self, finished_id: int, idepth: np.ndarray, var: np.ndarray, keyframe_id: int, frame: Any,
+                T_wc: np.ndarray) -> WindowUpdate:  # fmt: skip
+        """Sample the finished keyframe's points, add ``frame`` as the new keyframe (a target), optimise, let the
+        oldest leave. The new keyframe's scale is set by :meth:`set_scale` once its map is made."""
+        if not self.keyframes or self.keyframes[-1].keyframe_id != finished_id:  # not the window's: begin anew
+            return self.start(keyframe_id, frame, T_wc, float("nan"))
+        t0 = time.perf_counter()
+        host = self.keyframes[-1]
+        if self._channels != host.frame.n_channels:  # the channel rule's factor of Σ_c r_c² for this feature
+            c = self.vo_config
+            self._channels = host.frame.n_channels
+            self.bundle.params[0] = ChannelRule.of(c.channel_cost, self._channels, c.info_channels, c.energy_channels,
+                                                   c.noise_energy_channels).residual  # fmt: skip
+        pts = sample_points(host.frame, idepth, var, self.config)
+        if pts is not None:
+            pts.d = pts.d_map / host.scale
+        host.points = pts
+        self.keyframes.append(WindowKeyframe(keyframe_id, frame, _inv_se3(np.asarray(T_wc, np.float64)), float("nan")))
+        update = WindowUpdate()
+        if any(kf.points is not None for kf in self.keyframes):
+            report = self.bundle.optimise(self.keyframes)
+            self.last_report = report
+            self.stats.optimisations += 1
+            if report.cost_before > 0:
+                self.stats.cost_ratio.append(report.cost_after / report.cost_before)
+            if report.intrinsics is not None and report.intrinsics_sigma is not None:
+                self.stats.intrinsics.append(report.intrinsics)
+                self.stats.intrinsics_sigma.append(report.intrinsics_sigma)
+            for kf in self.keyframes[1:-1]:  # a finished keyframe's units: its map's inverse depths over the optimised
+                if kf.points is not None and kf.points.count:
+                    kf.scale = float(np.median(kf.points.d_map / kf.points.d))
+            update.poses = {kf.keyframe_id: (_inv_se3(kf.T_cw), kf.scale) for kf in self.keyframes[1:]}
+        while len(self.keyframes) > self.config.size:
+            update.left.append(self.keyframes.pop(0).keyframe_id)
+        self.stats.time_ms += 1e3 * (time.perf_counter() - t0)
+        return update
+
+    def set_scale(self, keyframe_id: int, scale: float) -> None:
+        """The current keyframe's map units in world units (its parent's scale times the ρ its map was normalised
+        with)."""
+        if self.keyframes and self.keyframes[-1].keyframe_id == keyframe_id:
+            self.keyframes[-1].scale = float(scale)

@@ -5,7 +5,7 @@ Usage::
     python benchmarks/bench_table7.py [--frames 100] [--features gray,bitplanes,alexnet,alexnet-pca8]
                                       [--learned] [--warmup-frames 10] [--repeat 1] [--threads N]
                                       [--alexnet-weights auto|random|PATH] [--calib-frames 5]
-                                      [--sequence DIR] [--out benchmarks/results/table7]
+                                      [--sequence DIR] [--out out/benchmarks/table7]
                                       [--device cpu|cuda|cuda:N]
 
 What it measures
@@ -381,7 +381,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calib-frames", type=int, default=5, help="frames for AlexNet's scale and PCA")
     ap.add_argument("--pca-scale", choices=("calibrate", "1"), default="calibrate",
                     help="scale of the alexnet-pcaK features: calibrated like the default scales, or 1")
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "table7",
+    ap.add_argument("--out", type=Path, default=REPO / "out" / "benchmarks" / "table7",
                     help="output prefix: OUT.json and OUT.md")
     ap.add_argument("--device", default="cpu", help="where the network features run: cpu (default), cuda, cuda:N")
     args = ap.parse_args(argv)

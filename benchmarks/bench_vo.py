@@ -34,7 +34,7 @@ Every run's trajectory is hashed (SHA-256 of the float64 poses): all hashes must
 hash lets a before/after comparison check that an optimisation left the results bit-identical.
 
 The load average before and after is recorded: on a shared machine compare relative changes only.
-Results go to ``benchmarks/results/vo_<feature>.json`` (or ``--out``) and a table is printed.
+Results go to ``out/benchmarks/vo_<feature>.json`` (or ``--out``) and a table is printed.
 """
 
 from __future__ import annotations
@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's default)")
     ap.add_argument("--warmup-frames", type=int, default=40)
     ap.add_argument("--no-track", action="store_true", help="skip the end-to-end dmtrack.track() runs")
-    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/vo_<feature>.json)")
+    ap.add_argument("--out", default=None, help="JSON path (default out/benchmarks/vo_<feature>.json)")
     ap.add_argument("--label", default="", help="free text stored in the JSON (e.g. 'before', 'after')")
     args = ap.parse_args(argv)
 
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"trajectory hash {hashes[0]}; deterministic across runs: {deterministic}")
     print(f"load average before {load_before}, after {load_after}")
 
-    out = Path(args.out) if args.out else REPO / "benchmarks" / "results" / f"vo_{args.feature}.json"
+    out = Path(args.out) if args.out else REPO / "out" / "benchmarks" / f"vo_{args.feature}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     doc = {
         "label": args.label,

@@ -5,7 +5,7 @@ keyframe (the search before the index, ``CandidateSearch(shortlist=None)``) agai
 Usage::
 
     python benchmarks/candidate_search_speed.py [--rooms 16] [--per-room 125] [--sizes 125,250,500,1000,1995]
-        [--queries 5] [--threads 1] [--out benchmarks/results/candidates-2026-11-28]
+        [--queries 5] [--threads 1] [--out out/benchmarks/candidates]
 
 The run is ``--rooms`` synthetic rooms (``synthetic:seed=r,fps=3,…``, 320 × 240), ``--per-room`` frames each, one
 after the other: every frame stands in for a keyframe (its image; its exact inverse depth, rendered again when a
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", default="125,250,500,1000,1995")
     ap.add_argument("--queries", type=int, default=5)
     ap.add_argument("--threads", type=int, default=1, help="OpenCV's threads (cv2.setNumThreads)")
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "candidates-2026-11-28")
+    ap.add_argument("--out", type=Path, default=REPO / "out" / "benchmarks" / "candidates")
     a = ap.parse_args(argv)
     import cv2
 

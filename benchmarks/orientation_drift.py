@@ -12,7 +12,7 @@ trajectory: the drift every ``--every`` frames up to ``--until``, the drift at 1
 drift *after* frame ``--after`` measured from that frame on (does a run that started badly keep drifting faster?).
 
 It was written to see where the seed-to-seed spread of RPE on 7-Scenes comes from
-(``benchmarks/results/seed-lottery-2026-11-27/``). ``benchmarks/seed_study.py --trajectories`` writes the inputs.
+(``benchmarks/studies/2026-11-27-seed-lottery/``). ``benchmarks/seed_study.py --trajectories`` writes the inputs.
 """
 
 from __future__ import annotations

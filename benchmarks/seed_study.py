@@ -14,7 +14,7 @@ more or less accurate is therefore a median over seeds (and its range), never on
 :func:`dmtrack.track` for every seed (one process per run, one numba thread each, ``--jobs`` at a time; results
 do not depend on it), and writes ``NAME.csv`` (one row per seed: tracked frames, keyframes, RPE rotation and
 translation angle, ATE) and ``NAME.md`` (the rows, then median and range of each metric, and the median over
-the first three seeds) into ``--out`` (default ``benchmarks/results``). ``--trajectories`` also writes every seed's
+the first three seeds) into ``--out`` (default ``out/benchmarks``). ``--trajectories`` also writes every seed's
 estimated trajectory (``NAME_seedS.txt``, TUM) and the ground truth (``NAME_groundtruth.txt``) there, e.g. for
 ``benchmarks/orientation_drift.py``.
 """
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--r-l", default=None, help="RPE length ratio, e.g. 1/20 (default: per dataset)")
     ap.add_argument("--intrinsics", default=None)
-    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
+    ap.add_argument("--out", default=str(REPO / "out" / "benchmarks"))
     ap.add_argument("--name", default=None)
     ap.add_argument("--trajectories", action="store_true", help="also write each seed's trajectory and the truth")
     a = ap.parse_args(argv)

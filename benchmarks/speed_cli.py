@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/speed_cli.py [--sequence ../shared/data/7scenes-0000-0699] [--features gray,bitplanes,dsift]
-                                   [--frames 700] [--repeat 3] [--out benchmarks/results/speed_cli.json]
+                                   [--frames 700] [--repeat 3] [--out out/benchmarks/speed_cli.json]
 
 What it measures, per feature
 -----------------------------
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--busy", type=int, default=0, help="other processes kept busy during the timed runs")
     ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
                     help="environment variable of the timed dmtrack processes (repeatable)")
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "speed_cli.json")
+    ap.add_argument("--out", type=Path, default=REPO / "out" / "benchmarks" / "speed_cli.json")
     a = ap.parse_args(argv)
     extra = {}
     for item in a.env:

@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/start_speed.py [--sequence ../shared/data/7scenes-0000-0699] [--feature gray] [--frames 700]
-        [--inits random,geometric] [--repeat 3] [--out benchmarks/results/start_speed.json]
+        [--inits random,geometric] [--repeat 3] [--out out/benchmarks/start_speed.json]
 
 Runs ``dmtrack run SEQUENCE --feature F --init I --max-frames N --out TMP`` (default outputs on: trajectory, point
 cloud, depth pictures, metrics) in a fresh process each, alternating the starts (A B A B …) on a warm numba cache
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=700)
     ap.add_argument("--inits", default="random,geometric")
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "start_speed.json")
+    ap.add_argument("--out", type=Path, default=REPO / "out" / "benchmarks" / "start_speed.json")
     a = ap.parse_args(argv)
     inits = a.inits.split(",")
     runs: dict[str, list[dict]] = {i: [] for i in inits}

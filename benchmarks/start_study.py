@@ -11,7 +11,7 @@ starts from: ``--starts`` runs the same configuration from several frames of a s
 frames or the end), e.g. to check a choice made on frames 0–349 on frames 350–699. Every run is a separate process
 with one numba thread (``--jobs`` at a time; results do not depend on it). Writes ``NAME.csv`` and ``NAME.md`` (the
 rows, then per start frame and over all the median and range of each metric, and where the start accepted) into
-``--out`` (default ``benchmarks/results``); ``--trajectories`` also writes each run's trajectory
+``--out`` (default ``out/benchmarks``); ``--trajectories`` also writes each run's trajectory
 (``NAME_start{F}_seed{S}.txt``) and the ground truth over its frames (``NAME_start{F}_groundtruth.txt``).
 """
 
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--r-l", default=None, help="RPE length ratio, e.g. 1/20 (default: per dataset)")
     ap.add_argument("--intrinsics", default=None)
-    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
+    ap.add_argument("--out", default=str(REPO / "out" / "benchmarks"))
     ap.add_argument("--name", default=None)
     ap.add_argument("--trajectories", action="store_true", help="also write each run's trajectory and the truth")
     a = ap.parse_args(argv)

@@ -4,7 +4,7 @@
 #   benchmarks/gpu/device_checks.sh [OUT]            # on the GPU machine: DEVICE=cuda (default)
 #   DEVICE=cpu FRAMES=10 RUN_FRAMES=20 benchmarks/gpu/device_checks.sh /tmp/x   # the same script on a CPU
 #
-# It writes into OUT (default $OUT, else benchmarks/results/gpu):
+# It writes into OUT (default $OUT, else out/benchmarks/gpu):
 #   info.txt            `dmtrack info` (versions, the GPU's name, whether it is usable)
 #   table7_DEVICE.md/json  Table 7 (generation with the transfer, tracking, total) for gray, bitplanes, dsift,
 #                       alexnet, alexnet-pca64..pca1, tfeat, disk, tracknet on FRAMES frames of data/
@@ -15,7 +15,7 @@
 # plyfile / plotly are not needed (no point clouds, no HTML). Wheels in .whl/ are installed first if present.
 set -uo pipefail   # no -e: a failing step is logged and the next one still runs
 cd "$(dirname "$0")/../.."
-OUT_DIR=${1:-${OUT:-benchmarks/results/gpu}}
+OUT_DIR=${1:-${OUT:-out/benchmarks/gpu}}
 DEVICE=${DEVICE:-cuda}
 FRAMES=${FRAMES:-100}
 RUN_FRAMES=${RUN_FRAMES:-150}

@@ -80,7 +80,7 @@ def _passive_omp_waits() -> None:
     numba's default threading layer here is OpenMP (libgomp). With the policy unset, libgomp's threads spin at the
     end of every parallel region before they sleep; the odometry runs a few dozen short regions per frame. On a
     machine where another process holds a core, the spinning thread and the thread it waits for share that core,
-    and grey tracking ran 3.2× slower (benchmarks/results/omp-wait-2026-11-27: 5.5 against 18.0 fps, 300 frames of
+    and grey tracking ran 3.2× slower (benchmarks/studies/2026-11-27-omp-wait: 5.5 against 18.0 fps, 300 frames of
     the shared 7-Scenes with one other busy process). Sleeping threads cost nothing measurable on an idle machine
     (there 25.3–25.9 against 24.4–24.8 fps). libgomp reads the variable when it is loaded, at numba's first parallel
     kernel: set here, before any dmtrack module imports numba. It has no effect where libgomp was loaded earlier in

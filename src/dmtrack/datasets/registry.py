@@ -129,12 +129,15 @@ def open_sequence(
 
     Parameters
     ----------
-    format : force a format (one of :data:`FORMATS`) instead of detecting it.
-    intrinsics : intrinsics replacing the dataset's — a camera, the string ``"fx,fy,cx,cy"`` (pixels of the
+    format
+        Force a format (one of :data:`FORMATS`) instead of detecting it.
+    intrinsics
+        Intrinsics replacing the dataset's — a camera, the string ``"fx,fy,cx,cy"`` (pixels of the
         stored images), or the path of a file: ``fx fy cx cy`` or a 3×3 K, or a 4-line DSO calibration (e.g.
         written by ``dmtrack calibrate-camera``) whose distortion is then removed from every frame.  Required
         for a live source.
-    **options : passed to the reader (e.g. ``camera_folder="image_2"`` for KITTI, ``fps=`` for an image folder,
+    **options
+        Passed to the reader (e.g. ``camera_folder="image_2"`` for KITTI, ``fps=`` for an image folder,
         ``capture=`` (the ``VideoCapture`` factory) for a live source).
 
     Raises

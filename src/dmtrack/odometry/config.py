@@ -406,7 +406,7 @@ class InitConfig:
     """Robust estimator of the essential matrix: ``magsac`` (``cv2.USAC_MAGSAC``, MAGSAC++ with its fixed seed),
     ``ransac`` (``cv2.RANSAC``, before issue 37) or ``accurate`` (``cv2.USAC_ACCURATE``). MAGSAC++ was chosen on
     the start scan's KITTI 06 and forward-driving starts (rotation of the two-view fit 0.01–0.08° against RANSAC's
-    0.4–1.4°); benchmarks/results/start-2026-11-28/ gives it on the others."""
+    0.4–1.4°); benchmarks/studies/2026-11-28-start/ gives it on the others."""
     min_parallax_deg: float = 0.5
     """Median parallax angle of the triangulated corners, degrees, before the window is tried."""
     max_homography_fraction: float = 0.9

@@ -94,6 +94,9 @@ class KeyframeSnapshot:
     def points_world(self, max_var: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World points of the pixels with positive inverse depth, and their colours.
 
+        Both arrays are read-only: the result of the last call is kept, so that several sinks (the run folder and
+        a viewer) compute it once.
+
         Parameters
         ----------
         max_var : float, optional
@@ -101,11 +104,10 @@ class KeyframeSnapshot:
 
         Returns
         -------
-        points : (M, 3) float64, world coordinates.
-        colours : (M, 3) uint8 RGB (grey repeated; mid-grey when there is no image).
-
-        Both arrays are read-only: the result of the last call is kept, so that several sinks (the run folder and
-        a viewer) compute it once.
+        points : np.ndarray
+            (M, 3) float64, world coordinates.
+        colours : np.ndarray
+            (M, 3) uint8 RGB (grey repeated; mid-grey when there is no image).
         """
         if self._points and self._points[0] == max_var:
             return self._points[1], self._points[2]

@@ -86,33 +86,49 @@ def track(
 
     Parameters
     ----------
-    sequence : a path (any format :func:`dmtrack.datasets.open_sequence` reads, a live source ``camera:N`` /
+    sequence
+        A path (any format :func:`dmtrack.datasets.open_sequence` reads, a live source ``camera:N`` /
         ``rtsp://…`` included) or a Sequence.
-    feature : a registry name (``dmtrack features``) or a Feature object.
-    config : odometry parameters (LSD-SLAM defaults when None).
-    start, max_frames : process frames ``start … start + max_frames − 1`` (of a live source: the frames it
-        delivers, until it ends when ``max_frames`` is None).
-    seed : seed of the random depth initialisation (overrides ``config.seed``).
-    init : how the first keyframe's map is made, ``"random"``, ``"geometric"`` or ``"groundtruth"`` (overrides
+    feature
+        A registry name (``dmtrack features``) or a Feature object.
+    config
+        Odometry parameters (LSD-SLAM defaults when None).
+    start
+        First frame to process: frames ``start … start + max_frames − 1`` are processed.
+    max_frames
+        How many frames to process (None: to the end; of a live source: the frames it delivers, until it ends).
+    seed
+        Seed of the random depth initialisation (overrides ``config.seed``).
+    init
+        How the first keyframe's map is made, ``"random"``, ``"geometric"`` or ``"groundtruth"`` (overrides
         ``config.init``; see :class:`~dmtrack.odometry.config.VOConfig` and docs/initialization.md).
-    sink : receives poses / keyframes / losses as they happen (e.g. :class:`RunDirectorySink`).
-    intrinsics : ``"fx,fy,cx,cy"`` or a calibration file (see :func:`dmtrack.datasets.open_sequence`).
-    r_l : RPE length ratio for the metrics (default: 1/20 for KITTI, 1/3 otherwise).
-    progress : show a progress bar (None: only on a terminal).
-    realtime : track at the speed frames come: a grabber thread reads them (a live source as fast as it
+    sink
+        Receives poses / keyframes / losses as they happen (e.g. :class:`RunDirectorySink`).
+    intrinsics
+        ``"fx,fy,cx,cy"`` or a calibration file (see :func:`dmtrack.datasets.open_sequence`).
+    r_l
+        RPE length ratio for the metrics (default: 1/20 for KITTI, 1/3 otherwise).
+    progress
+        Show a progress bar (None: only on a terminal).
+    realtime
+        Track at the speed frames come: a grabber thread reads them (a live source as fast as it
         delivers, a recorded sequence played at its timestamps against the wall clock) and the odometry always
         takes the newest one; frames it had no time for are dropped and counted (``dropped_frames``).  Which
         frames are dropped depends on the machine and its load, so realtime runs are **not** deterministic
         (without it, results are byte-identical run to run).
-    warmup : first compile or load the kernels (:func:`warm_up`; ``compile_s``), so that ``fps`` measures
+    warmup
+        First compile or load the kernels (:func:`warm_up`; ``compile_s``), so that ``fps`` measures
         tracking only; results are the same either way.
-    slam : True or a :class:`~dmtrack.slam.backend.SlamConfig`: the keyframes also enter a keyframe graph with loop
+    slam
+        True or a :class:`~dmtrack.slam.backend.SlamConfig`: the keyframes also enter a keyframe graph with loop
         closures, optimised by gtsam (``pip install 'dmtrack[slam]'``); the result's trajectory is then the
         optimised one (docs/slam.md).
-    device : where a network feature given by name runs: ``"auto"`` (a CUDA GPU when PyTorch sees one, else the
+    device
+        Where a network feature given by name runs: ``"auto"`` (a CUDA GPU when PyTorch sees one, else the
         CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (:mod:`dmtrack.features.device`); None: the feature's
         default (``"auto"``). The hand-crafted features always run on the CPU.
-    frames : run on these frames of the sequence only, e.g. ``"0-349,500-699"`` (inclusive ranges, ``A:B`` half-open
+    frames
+        Run on these frames of the sequence only, e.g. ``"0-349,500-699"`` (inclusive ranges, ``A:B`` half-open
         ones, single frames; increasing): they become frames 0, 1, … of the run (``start`` and ``max_frames`` then
         count in them). Leaving frames out makes a camera that jumps: a kidnapped camera.
 

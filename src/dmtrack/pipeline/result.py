@@ -28,29 +28,44 @@ class RunResult:
 
     Attributes
     ----------
-    trajectory : tracked frames' T_wc with the dataset's timestamps.
-    keyframes : keyframes' T_wc.
-    frame_indices : dataset frame index of each trajectory pose.
-    total_frames, tracked_frames : frames given to the odometry, frames with a pose.
-    lost_at, lost_reason : first frame (dataset index) where tracking was lost, and why; ``None`` if never.
-    timings_ms : mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction) — both measured on
+    trajectory
+        Tracked frames' T_wc with the dataset's timestamps.
+    keyframes
+        Keyframes' T_wc.
+    frame_indices
+        Dataset frame index of each trajectory pose.
+    total_frames, tracked_frames
+        Frames given to the odometry, frames with a pose.
+    lost_at, lost_reason
+        First frame (dataset index) where tracking was lost, and why; ``None`` if never.
+    timings_ms
+        Mean per frame: ``io`` (reading/decoding), ``feature`` (feature extraction) — both measured on
         the prefetch thread, where they overlap with the odometry of earlier frames — ``pyramid``,
         ``tracking``, ``mapping``; and ``wall_s`` (whole loop).
-    metrics : the ``metrics.json`` contents (see :func:`metrics_dict`).
-    vo : the odometry's own summary.
-    groundtruth : the sequence's ground truth over the frames given to the odometry (``None`` without one);
+    metrics
+        The ``metrics.json`` contents (see :func:`metrics_dict`).
+    vo
+        The odometry's own summary.
+    groundtruth
+        The sequence's ground truth over the frames given to the odometry (``None`` without one);
         written as ``groundtruth.txt`` by :func:`run_to_directory`.
-    halted_by : why the run stopped before its last frame other than a tracking loss — an interrupt
+    halted_by
+        Why the run stopped before its last frame other than a tracking loss — an interrupt
         (:class:`KeyboardInterrupt`, :class:`~dmtrack.errors.Interrupted` for SIGTERM) or an output that could
         not be written (:class:`~dmtrack.errors.OutputError`); ``None`` for a run that went to its end.
         :func:`track` and :func:`run_to_directory` re-raise it once the finished frames are saved.
-    dropped_frames : frames of a ``realtime`` run that the odometry skipped because a newer one had come.
-    realtime : whether the run was a ``realtime`` one.
-    compile_s : seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
+    dropped_frames
+        Frames of a ``realtime`` run that the odometry skipped because a newer one had come.
+    realtime
+        Whether the run was a ``realtime`` one.
+    compile_s
+        Seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
         0 when this process had warmed up the feature and configuration already, or without warm-up).
-    init : how the first map was made: ``metrics.json``'s ``init*`` keys
+    init
+        How the first map was made: ``metrics.json``'s ``init*`` keys
         (:meth:`~dmtrack.initialization.run_start.RunStart.metrics`).
-    slam : the SLAM back end of a ``slam=`` run (:class:`~dmtrack.slam.backend.ThreadedSlam`), else ``None``;
+    slam
+        The SLAM back end of a ``slam=`` run (:class:`~dmtrack.slam.backend.ThreadedSlam`), else ``None``;
         ``trajectory`` is then its optimised trajectory (the odometry's when the back end failed:
         ``slam.error``), and ``vo_trajectory`` the odometry's.
     """

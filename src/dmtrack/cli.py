@@ -667,6 +667,10 @@ def build_parser() -> argparse.ArgumentParser:
     from dmtrack.training.cli import add_train_parser
 
     add_train_parser(sub)
+
+    from dmtrack.ros.cli import add_ros2_parser
+
+    add_ros2_parser(sub, _feature_options, _add_device_arg)
     return parser
 
 
@@ -709,7 +713,13 @@ def _terminate_as_interrupt() -> _Iter[None]:
 
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args = argv[argv.index("--ros-args"):] if "--ros-args" in argv else []  # ROS's own, for dmtrack ros2
+    args = parser.parse_args(argv[: len(argv) - len(ros_args)])
+    if ros_args:
+        if args.command != "ros2":
+            parser.error(f"--ros-args: only dmtrack ros2 takes ROS arguments, not dmtrack {args.command}")
+        args.ros_args = ros_args
     showwarning = warnings.showwarning
     warnings.showwarning = _showwarning
     try:

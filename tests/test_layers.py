@@ -32,6 +32,7 @@ LAYERS: list[set[str]] = [
     {"evaluation"},
     {"pipeline"},
     {"experiments"},
+    {"ros"},  # the ROS 2 node: a frame source and a sink around the run loop
     {"api", "cli", "__main__"},
 ]
 MAX_LINES = 800

@@ -35,6 +35,9 @@ def _add_sequence_args(p: argparse.ArgumentParser, optional: bool = False) -> No
         help="pinhole intrinsics (pixels of the stored images) replacing or supplying the dataset's, or a "
         "calibration file (fx fy cx cy, or the DSO file calibrate-camera writes: frames are undistorted with it)",
     )
+    p.add_argument("--topic", metavar="TOPIC",
+                   help="of a ROS bag (a ROS 1 .bag or a ROS 2 bag folder): the image topic (Image or CompressedImage; "
+                        "not needed when the bag has one)")
 
 
 def _sequence_summary(seq: Any) -> dict[str, Any]:
@@ -112,18 +115,62 @@ def _print_summary(info: dict[str, Any]) -> None:
         print(f"{k:<{width}}  {v}")
 
 
-def cmd_info(args: argparse.Namespace) -> int:
+def _open_sequence_args(args: argparse.Namespace) -> Any:
+    """The sequence named on the command line, with ``--format``, ``--intrinsics`` and (of a ROS bag) ``--topic``."""
     from dmtrack.datasets import open_sequence
+    from dmtrack.datasets.registry import detect_format
+    from dmtrack.errors import InputError
 
+    options = {}
+    if args.topic is not None:
+        if (args.format or detect_format(args.sequence)) != "rosbag":
+            raise InputError(f"--topic {args.topic}: only a ROS bag has topics, {args.sequence} is not one")
+        options["topic"] = args.topic
+    return open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics, **options)
+
+
+def _bag_topics(args: argparse.Namespace) -> list[dict[str, Any]] | None:
+    """The image topics of a ROS bag (``dmtrack info BAG``), or None for another sequence."""
+    from dmtrack.datasets.registry import detect_format
+
+    if (args.format or detect_format(args.sequence)) != "rosbag":
+        return None
+    import dataclasses
+
+    from dmtrack.datasets.rosbag import image_topics
+
+    return [dataclasses.asdict(t) for t in image_topics(args.sequence)]
+
+
+def cmd_info(args: argparse.Namespace) -> int:
     if args.sequence is None:  # the machine: versions and whether the network features can use a GPU
         return _print_environment(args.json)
-    seq = open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics)
-    info = _sequence_summary(seq)
+    topics = _bag_topics(args)
+    if topics is not None and args.topic is None and len(topics) != 1:  # a bag: its image topics, then choose one
+        if args.json:
+            print(json.dumps({"format": "rosbag", "path": str(args.sequence), "image_topics": topics}, indent=2))
+        else:
+            _print_topics(topics)
+            print(f"choose one with --topic ({len(topics)} image topics)")
+        return 0
+    info = _sequence_summary(_open_sequence_args(args))
+    if topics is not None:
+        info["image_topics"] = topics
     if args.json:
         print(json.dumps(info, indent=2))
     else:
         _print_summary(info)
+        if topics is not None:
+            _print_topics(topics)
     return 0
+
+
+def _print_topics(topics: list[dict[str, Any]]) -> None:
+    print("image topics:" if topics else "image topics: none")
+    for t in topics:
+        kind = "CompressedImage" if t["msgtype"].endswith("CompressedImage") else "Image"
+        info = f", intrinsics from {t['camera_info']}" if t["camera_info"] else ", no camera_info"
+        print(f"  {t['topic']}  ({kind}, {t['count']} messages{info})")
 
 
 def _print_environment(as_json: bool) -> int:
@@ -206,6 +253,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from dmtrack.features import get_feature
 
     feature = get_feature(args.feature, **_feature_options(args.feature_opt, args.device))
+    if args.rosbag_out:
+        from dmtrack.io.rosbag import rosbags_modules
+
+        rosbags_modules("--rosbag-out")  # without rosbags: one line, before the run
     sequence, viewers = _run_viewers(args)
     try:
         result = run_to_directory(
@@ -262,6 +313,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"accuracy: not evaluated ({m['evaluation_error']})")
     if m.get("slam"):
         print(_slam_line(m))
+    if args.rosbag_out:
+        from dmtrack.io.rosbag import write_trajectory_bag
+
+        traj = result.trajectory
+        write_trajectory_bag(args.rosbag_out, traj.timestamps, traj.poses)
+        print(f"ROS 2 bag: {args.rosbag_out}/ ({len(traj)} odometry and /tf messages, one path)")
     print(f"outputs: {out}/" + (f", recording: {args.rrd}" if args.rrd else ""))
     return 0
 
@@ -270,12 +327,11 @@ def _run_viewers(args: argparse.Namespace) -> tuple[Any, tuple[Any, ...]]:
     """The sequence to run and, for ``--viewer`` / ``--rrd``, a RerunSink with the sequence's ground truth (opened
     here once and handed to the run as a Sequence)."""
     if not (args.viewer or args.rrd):
-        return args.sequence, ()
-    from dmtrack.datasets import open_sequence
+        return (args.sequence if args.topic is None else _open_sequence_args(args)), ()
     from dmtrack.evaluation.alignment import umeyama
     from dmtrack.outputs.rerun_sink import RerunSink
 
-    seq = open_sequence(args.sequence, format=args.format, intrinsics=args.intrinsics)
+    seq = _open_sequence_args(args)
     return seq, (RerunSink(spawn=args.viewer, rrd=args.rrd, groundtruth=seq.groundtruth, align=umeyama),)
 
 
@@ -518,6 +574,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--viewer", action="store_true",
                    help="show the run live in the Rerun viewer (needs a display and pip install 'dmtrack[viewer]')")
     p.add_argument("--rrd", metavar="FILE", help="record the live view to a Rerun file (open it with `rerun FILE`)")
+    p.add_argument("--rosbag-out", metavar="DIR",
+                   help="also write the trajectory as a ROS 2 bag folder: nav_msgs/Odometry and /tf per frame, the "
+                        "nav_msgs/Path at the end (for rviz, PlotJuggler; pip install 'dmtrack[ros]')")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("warmup", help="compile the kernels of features into numba's cache (once after installing)",
@@ -608,6 +667,10 @@ def build_parser() -> argparse.ArgumentParser:
     from dmtrack.training.cli import add_train_parser
 
     add_train_parser(sub)
+
+    from dmtrack.ros.cli import add_ros2_parser
+
+    add_ros2_parser(sub, _feature_options, _add_device_arg)
     return parser
 
 
@@ -650,7 +713,13 @@ def _terminate_as_interrupt() -> _Iter[None]:
 
 def main(argv: _Seq[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args = argv[argv.index("--ros-args"):] if "--ros-args" in argv else []  # ROS's own, for dmtrack ros2
+    args = parser.parse_args(argv[: len(argv) - len(ros_args)])
+    if ros_args:
+        if args.command != "ros2":
+            parser.error(f"--ros-args: only dmtrack ros2 takes ROS arguments, not dmtrack {args.command}")
+        args.ros_args = ros_args
     showwarning = warnings.showwarning
     warnings.showwarning = _showwarning
     try:

@@ -4,11 +4,12 @@ Detection order (first match wins, most specific layouts first): ``7scenes`` (``
 (``image_0/`` or ``image_2/`` with ``calib.txt``/``times.txt``), ``euroc`` (``mav0/cam0/data.csv``),
 ``tum-monovo`` (``camera.txt`` + ``times.txt`` + ``images.zip``/``images/``), ``tum-rgbd`` (``rgb.txt``),
 ``icl-nuim`` (``associations.txt`` + ``rgb/``), ``tsukuba`` (``illumination/`` + ``groundtruth/camera_track.txt``),
-``lsd-slam`` (``cameraCalibration.cfg`` + images), ``image-folder`` (images in the folder or in ``images/``).
-A file with a video extension is a ``video``.  ``synthetic`` is not a folder: ``synthetic`` or
-``synthetic:key=value,…`` (keys of :class:`~dmtrack.datasets.synthetic.SyntheticConfig`).  ``camera:N``,
-``rtsp://…`` and ``http(s)://…`` are live sources (format ``stream``, :mod:`dmtrack.datasets.stream`); they need
-intrinsics.
+``lsd-slam`` (``cameraCalibration.cfg`` + images), ``image-folder`` (images in the folder or in ``images/``); a
+ROS 2 bag folder (``metadata.yaml``) is a ``rosbag``, checked first. A file with a video extension is a ``video``,
+a ``.bag`` file a ``rosbag`` (ROS 1; ``topic=`` chooses the image topic).  ``synthetic`` is not a folder:
+``synthetic`` or ``synthetic:key=value,…`` (keys of :class:`~dmtrack.datasets.synthetic.SyntheticConfig`).
+``camera:N``, ``rtsp://…`` and ``http(s)://…`` are live sources (format ``stream``, :mod:`dmtrack.datasets.stream`);
+they need intrinsics.
 
 Intrinsics given to :func:`open_sequence` replace the dataset's: a :class:`PinholeCamera`, the string
 ``"fx,fy,cx,cy"``, or a file — ``fx fy cx cy`` / a 3×3 K (pixels), or a 4-line DSO calibration such as
@@ -28,6 +29,7 @@ from dmtrack.datasets import (
     imagefolder,
     kitti,
     lsdslam,
+    rosbag,
     sevenscenes,
     stream,
     tsukuba,
@@ -53,6 +55,8 @@ class Reader:
 READERS: dict[str, Reader] = {
     r.name: r
     for r in (
+        Reader("rosbag", rosbag.detect, rosbag.open_rosbag,
+               "ROS 1 .bag or ROS 2 bag folder, one image topic (--topic; rosbags, pip install 'dmtrack[ros]')"),
         Reader("7scenes", sevenscenes.detect, sevenscenes.open_7scenes, "Microsoft 7-Scenes sequence folder"),
         Reader("kitti", kitti.detect, kitti.open_kitti, "KITTI odometry (sequences/NN/image_0|image_2)"),
         Reader("euroc", euroc.detect, euroc.open_euroc, "EuRoC MAV (mav0/cam0, undistorted)"),
@@ -84,8 +88,11 @@ def detect_format(path: str | Path) -> str:
     if not p.is_dir():
         if video.detect(p):
             return "video"
+        if rosbag.detect(p):
+            return "rosbag"
         raise DatasetError(
-            f"a sequence is a folder or a video file ({', '.join(video.VIDEO_EXTENSIONS)}); this is neither", path=p
+            f"a sequence is a folder or a video file ({', '.join(video.VIDEO_EXTENSIONS)}), or a ROS 1 .bag; this "
+            "is none of them", path=p
         )
     for reader in READERS.values():
         if reader.detect(p):

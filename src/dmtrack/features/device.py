@@ -49,10 +49,11 @@ def _is_torch_device(spec: Any) -> bool:
 
 
 def _driver_present() -> bool:
-    """Whether an NVIDIA driver may be present (cheap; no PyTorch import). Off Linux: assume it may."""
+    """Whether an NVIDIA driver may be present (cheap; no PyTorch import): ``device="auto"`` imports PyTorch only
+    then. Off Linux: assume it may. WSL2 reaches the Windows driver through ``/dev/dxg``."""
     if not sys.platform.startswith("linux"):
         return True
-    return os.path.exists("/proc/driver/nvidia/version") or os.path.exists("/dev/nvidiactl")
+    return any(os.path.exists(p) for p in ("/proc/driver/nvidia/version", "/dev/nvidiactl", "/dev/dxg"))
 
 
 def cuda_problem() -> str | None:
@@ -63,11 +64,13 @@ def cuda_problem() -> str | None:
 
     if not torch.version.cuda:
         return f"PyTorch {torch.__version__} is a CPU-only build (install a CUDA build of torch)"
+    # PyTorch is asked first: a driver it can use may live where no file below says so (WSL2's is /dev/dxg)
+    if torch.cuda.is_available():
+        return None
     if not _driver_present():
-        return f"no NVIDIA driver on this machine (PyTorch {torch.__version__}; /proc/driver/nvidia is absent)"
-    if not torch.cuda.is_available():
-        return f"PyTorch {torch.__version__} (CUDA {torch.version.cuda}) sees no CUDA device"
-    return None
+        return (f"no NVIDIA driver on this machine (PyTorch {torch.__version__} sees no CUDA device; "
+                "/proc/driver/nvidia, /dev/nvidiactl and WSL2's /dev/dxg are absent)")
+    return f"PyTorch {torch.__version__} (CUDA {torch.version.cuda}) sees no CUDA device"
 
 
 def resolve_device(spec: Any) -> Any:

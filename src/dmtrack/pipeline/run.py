@@ -198,6 +198,9 @@ class SequenceRun:
         results: list[VOResult] = []
         halted_by: BaseException | None = None
         stops = _StopBetweenFrames().__enter__()
+        watch = getattr(live_source(self.seq), "watch_stop", None)
+        if callable(watch):  # a live source that waits for frames (the ROS node's) stops waiting on Ctrl-C
+            watch(lambda: stops.pending is not None)
         frames = self._frames(stops)
         run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
         self.t_start = time.perf_counter()
@@ -325,7 +328,8 @@ class SequenceRun:
                 vo=vo_result,
                 halted_by=halted_by,
                 groundtruth=groundtruth,
-                dropped_frames=int(frames.dropped),
+                # a live source that drops frames itself (the ROS node's queue) counts them too
+                dropped_frames=int(frames.dropped) + int(getattr(live_source(seq), "dropped", 0)),
                 realtime=self.realtime,
                 compile_s=self.compile_s,
                 init=run_start.metrics(config),

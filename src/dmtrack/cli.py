@@ -249,6 +249,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         config = config.with_overrides("stop_on_loss=false")
     if args.init:
         config = config.with_overrides(f"init={args.init}")
+    if args.window is not None:
+        config = config.with_overrides(f"window.size={args.window}")
+    if args.refine_intrinsics:
+        config = config.with_overrides("window.refine_intrinsics=true")
     out = Path(args.out) if args.out else Path("out") / f"{Path(str(args.sequence)).name}-{args.feature}"
     from dmtrack.features import get_feature
 
@@ -556,6 +560,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="SLAM: a keyframe graph with loop closures (Sim(3) alignment on the feature), optimised by "
                         "gtsam; trajectory.txt is the optimised one, the odometry's is trajectory_vo.txt "
                         "(pip install 'dmtrack[slam]'; docs/slam.md)")
+    p.add_argument("--window", type=int, metavar="K",
+                   help="optimise the newest K keyframes jointly (photometric bundle adjustment; 0: off, LSD-SLAM's "
+                        "odometry; docs/window.md)")
+    p.add_argument("--refine-intrinsics", action="store_true",
+                   help="the window also estimates the focal length from the images (metrics.json: window.intrinsics; "
+                        "a calibration from a video alone: dmtrack calibrate-from-video)")
     p.add_argument("--continue-after-loss", action="store_true",
                    help="keep going after a tracking loss: the lost frames get no pose until the camera is found "
                         "again on a keyframe of the run (relocalisation); without --slam a loss that lasts begins a "
@@ -608,6 +618,10 @@ def build_parser() -> argparse.ArgumentParser:
     from dmtrack.datasets.cli_calibrate import add_calibrate_parser
 
     add_calibrate_parser(sub)
+
+    from dmtrack.pipeline.cli_self_calibration import add_self_calibration_parser
+
+    add_self_calibration_parser(sub)
 
     def sampling_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--feature", required=True, help="feature name")

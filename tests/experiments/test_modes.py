@@ -48,3 +48,19 @@ def test_a_bench_runs_vo_and_slam_side_by_side(tmp_path: Path) -> None:
     again = run_bench([SYN], ["gray"], out, jobs=0, max_frames=20, modes=("vo", "slam"), device="cpu",
                       progress=False, report=False)  # fmt: skip
     assert again.executed == [] and len(again.skipped) == 2
+
+
+def test_a_bench_runs_the_window_beside_the_odometry(tmp_path: Path) -> None:
+    """``--modes vo,window``: the window is a dimension of the bench, each cell with its own spec and row."""
+    tasks, _ = plan_grid([SYN], ["gray"], tmp_path, modes=("vo", "window"))
+    assert [t.key for t in tasks] == ["synthetic-seed1/gray", "synthetic-seed1/gray+window"]
+    assert [t.spec["config"]["window"]["size"] for t in tasks] == [0, 5]
+    assert [t.spec.get("window") for t in tasks] == [None, True]
+    out = tmp_path / "bench"
+    syn = SYN.replace("n_frames=25", "n_frames=45")
+    res = run_bench([syn], ["gray"], out, jobs=0, modes=("vo", "window"), progress=False, figures=False)
+    assert not res.failed
+    records = {r.feature: r for r in collect_runs(out)}
+    assert set(records) == {"gray", "gray+window"}
+    assert records["gray+window"].metrics["window"]["optimisations"] >= 1 and "window" not in records["gray"].metrics
+    assert "| gray+window |" in (out / "report.md").read_text()

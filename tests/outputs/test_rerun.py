@@ -311,3 +311,18 @@ def test_a_relocalisation_is_drawn_live_and_from_the_run_folder(tmp_path: Path,
     capsys.readouterr()
     _, view = load(tmp_path / "view.rrd")
     np.testing.assert_allclose(points(view["/world/relocalisations"]), [where], atol=1e-5)
+
+
+def test_the_window_is_drawn_after_each_optimisation(tmp_path: Path) -> None:
+    """``--window``: the viewer gets the window's keyframes after every optimisation, at the keyframes' positions then
+    (the last drawing is where the run left them)."""
+    out = tmp_path / "run"
+    assert main(["run", "synthetic:n_frames=45,width=320,height=240,seed=1", "--window", "4", "--no-depth-images",
+                 "--no-pointcloud", "--out", str(out), "--rrd", str(tmp_path / "w.rrd")]) == 0  # fmt: skip
+    metrics = json.loads((out / "metrics.json").read_text())
+    _, ent = load(tmp_path / "w.rrd")
+    drawn = rows(ent["/world/window/keyframes"], "Points3D:positions")
+    assert len(drawn) == metrics["window"]["optimisations"] >= 1
+    last = points(ent["/world/window/keyframes"])[-min(4, metrics["keyframes"]):]  # the window after the last one
+    kfs = read_tum(out / "keyframes.txt")
+    np.testing.assert_allclose(last, kfs.positions[-len(last):], atol=1e-5)

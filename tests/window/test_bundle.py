@@ -226,3 +226,39 @@ def test_config_is_checked() -> None:
     with pytest.raises(InputError, match="window.levels"):
         VOConfig(window=WindowConfig(size=5, levels=(6, 1)))
     assert VOConfig().with_overrides("window.size=6", "window.levels=[3,2]").window.levels == (3, 2)
+
+
+def test_eliminating_variables_is_the_schur_complement() -> None:
+    from dmtrack.window.bundle import _eliminate_first
+
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(50, 14))
+    A, r = J.T @ J, rng.normal(size=14)
+    got_A, got_r = _eliminate_first(A, r, 6)
+    inv = np.linalg.inv(A[:6, :6])
+    np.testing.assert_allclose(got_A, A[6:, 6:] - A[6:, :6] @ inv @ A[:6, 6:], rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(got_r, r[6:] - A[6:, :6] @ inv @ r[:6], rtol=1e-7, atol=1e-9)
+
+
+def test_marginalised_keyframe_leaves_a_prior_that_holds_the_gauge(window) -> None:
+    """With ``leave = "marginalise"`` the oldest keyframe's residuals become a prior on the others: the next window,
+    without the old anchor and with nothing held fixed, still converges to the truth (the prior fixes where the
+    keyframes are and the scale), where a window without the prior would be free to drift."""
+    cfg = WindowConfig(size=4, depth_prior=0.0, levels=(2, 1, 0), iterations=20, leave="marginalise")
+    kfs, truth, depths = _keyframes(window, cfg)
+    cam = window[0].camera
+    ba = PhotometricBundle(cfg, (cam.fx, cam.fy, cam.cx, cam.cy), (cam.width, cam.height))
+    ba.optimise(kfs)
+    assert ba.anchored()
+    ba.marginalise(kfs)
+    assert not ba.anchored() and ba.marginal is not None and ba.marginal.ids == [1, 2, 3, 4]
+    w = np.linalg.eigvalsh(ba.marginal.H)
+    assert w.min() > -1e-6 * w.max() and w.max() > 0  # a positive semi-definite prior
+    rest, rest_truth = kfs[1:], truth[1:]
+    rng = np.random.default_rng(7)
+    for kf in rest:  # disturb again, the first of them too: nothing is fixed now
+        kf.T_cw = SE3.exp(np.concatenate([rng.normal(0, 0.005, 3), rng.normal(0, 0.002, 3)])).matrix() @ kf.T_cw
+    e0 = _pose_errors(rest, rest_truth)
+    ba.optimise(rest)
+    e1 = _pose_errors(rest, rest_truth)
+    assert e0.max() > 0.006 and e1.max() < 0.004

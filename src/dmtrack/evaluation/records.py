@@ -127,6 +127,8 @@ def collect_runs(bench_dir: str | Path) -> list[RunRecord]:
         feature = str(spec.get("feature") or m.get("feature") or key.split("/")[1])
         if spec.get("slam"):  # a SLAM cell of a bench with --modes (experiments.grid.mode_label)
             feature += "+slam"
+        if spec.get("window"):  # a window cell
+            feature += "+window"
         fmt, name = m.get("format") or spec.get("format"), m.get("sequence") or seq_dir.name
         dataset = datasets.get(seq_dir.name) or info.get("dataset") or dataset_label(fmt, name)
         unit = units.get(seq_dir.name) or info.get("unit") or length_unit(fmt, name)

@@ -123,9 +123,10 @@ def add_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--modes",
         default="vo",
-        metavar="vo,slam",
+        metavar="vo,slam,window",
         help="run every feature as the odometry alone (vo, the default), with the SLAM back end (slam; cells named "
-        "FEATURE+slam; pip install 'dmtrack[slam]') or both (vo,slam), side by side in the tables",
+        "FEATURE+slam; pip install 'dmtrack[slam]'), with the sliding window (window; cells FEATURE+window; "
+        "docs/window.md) or several (vo,window), side by side in the tables",
     )
     p.add_argument(
         "--device",

@@ -264,17 +264,20 @@ def make_spec(
     pointcloud: bool,
     device: str | None = None,
     slam: bool = False,
+    window: bool = False,
 ) -> dict[str, Any]:
     """The run spec stored in ``spec.json`` and compared on resume (see :mod:`dmtrack.experiments.store`).
 
-    ``device`` (where a network feature runs) and ``slam`` enter the spec only when given, so that the folders
-    of benches made before they existed still resume."""
+    ``device`` (where a network feature runs), ``slam`` and ``window`` (a cell of the ``window`` mode) enter the spec
+    only when given, so that the folders of benches made before they existed still resume."""
     s = seq.spec
     extra: dict[str, Any] = {}
     if device is not None:
         extra["device"] = device
     if slam:
         extra["slam"] = True
+    if window:
+        extra["window"] = True
     return normalise(
         {
             "spec_version": SPEC_VERSION,
@@ -360,8 +363,9 @@ def plan_grid(
                 for s in cell_seeds:
                     spec = make_spec(
                         rs, f, start=start, max_frames=max_frames, seed=s, r_l=r_l, format=format,
-                        intrinsics=intrinsics, config=cfg_dict, overrides=overrides, depth_images=depth_images,
-                        pointcloud=pointcloud, device=device, slam=mode == "slam",
+                        intrinsics=intrinsics, config=_mode_config(cfg_dict, mode), overrides=overrides,
+                        depth_images=depth_images, pointcloud=pointcloud, device=device, slam=mode == "slam",
+                        window=mode == "window",
                     )  # fmt: skip
                     sub = seed_dir_name(s) if len(cell_seeds) > 1 and s is not None else None
                     tasks.append(RunTask(bench_dir, rs.name, mode_label(f, mode), spec, rs.dataset, threads_per_job,
@@ -369,15 +373,26 @@ def plan_grid(
     return tasks, resolved
 
 
-#: The modes of a bench cell: the odometry alone, or with the SLAM back end (docs/slam.md).
-MODES = ("vo", "slam")
+#: The modes of a bench cell: the odometry as configured, with the SLAM back end (docs/slam.md), or with the sliding
+#: window (docs/window.md; the configuration's ``window.size``, or :data:`WINDOW_SIZE` when it has none).
+MODES = ("vo", "slam", "window")
+
+#: The window size of a ``window`` cell whose configuration has none.
+WINDOW_SIZE = 5
+
+
+def _mode_config(cfg: dict[str, Any], mode: str) -> dict[str, Any]:
+    """The configuration of a cell of ``mode``: a ``window`` cell has its window on."""
+    if mode != "window" or cfg["window"]["size"]:
+        return cfg
+    return {**cfg, "window": {**cfg["window"], "size": WINDOW_SIZE}}
 
 
 def check_modes(modes: Sequence[str]) -> tuple[str, ...]:
     """``modes`` validated (known, not repeated, at least one)."""
     out = tuple(str(m).strip().lower() for m in modes)
     if not out:
-        raise InputError("no mode given (vo, slam)")
+        raise InputError("no mode given (vo, slam, window)")
     bad = [m for m in out if m not in MODES]
     if bad or len(set(out)) != len(out):
         raise InputError(f"modes must be distinct values of {', '.join(MODES)}, got {list(modes)}")

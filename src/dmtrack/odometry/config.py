@@ -315,7 +315,7 @@ class RelocConfig:
 
 
 #: Values of ``WindowConfig.leave``.
-WINDOW_LEAVE_MODES = ("fixed",)
+WINDOW_LEAVE_MODES = ("fixed", "marginalise")
 
 #: Values of ``WindowConfig.intrinsics_model``.
 INTRINSICS_MODELS = ("f", "f-c", "fxfy-c")
@@ -352,7 +352,9 @@ class WindowConfig:
     """Weight of each point's inverse depth from the depth map as a prior (× 1/variance); 0: none."""
     leave: str = "fixed"
     """What happens to a keyframe that leaves the window: ``"fixed"`` (it keeps its last estimate and no longer
-    changes)."""
+    changes; the oldest keyframe in the window, with its points, is the fixed anchor) or ``"marginalise"`` (its
+    points and pose are eliminated from the linearised problem and leave a Gaussian prior on the other poses, as DSO;
+    after the first keyframe has left nothing is held fixed)."""
     refine_intrinsics: bool = False
     """Also estimate fx, fy, cx, cy from the images, with the given calibration as a prior."""
     intrinsics_model: str = "f"

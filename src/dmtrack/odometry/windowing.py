@@ -6,7 +6,9 @@ With a window, a keyframe is emitted to the sink when it leaves the window (or a
 and scale, instead of when the next keyframe is made; the current keyframe's pose and scale — what the next frames'
 poses are chained from — are the window's; and the run's trajectory (:meth:`VisualOdometry.result`) places every
 frame by its pose relative to its keyframe and that keyframe's final pose, as a SLAM back end's trajectory does.
-What the sink was told frame by frame (``on_frame``, the live trajectory) stays the pose known at that moment.
+What the sink was told frame by frame (``on_frame``, the live trajectory) stays the pose known at that moment; a sink
+with an ``on_window(frame_index, timestamp, poses)`` method (a viewer) is told the window's keyframe poses (id → T_wc)
+after each optimisation.
 """
 
 from __future__ import annotations
@@ -32,6 +34,10 @@ class WindowUpdate:
 
 class KeyframeWindow(Protocol):
     """A window of the newest keyframes, optimised jointly."""
+
+    @property
+    def keyframe_ids(self) -> list[int]:
+        """Ids of the keyframes in the window, oldest first."""
 
     def start(self, keyframe_id: int, frame: Any, T_wc: np.ndarray, scale: float) -> WindowUpdate:
         """Begin anew with this keyframe (the first of a map, or one made after a loss); every keyframe held leaves."""
@@ -112,6 +118,11 @@ class WindowedKeyframes:
         self._window.set_scale(new_id, s_wk * rho)
         self._held[old_id] = (old_kf, old_dm)
         self._emit_left(update.left)
+        on_window = getattr(self.sink, "on_window", None)  # type: ignore[attr-defined]
+        if on_window is not None:  # the window's keyframes as it left them (a viewer)
+            recs = self._keyframes  # type: ignore[attr-defined]
+            on_window(int(frame.index), float(frame.timestamp),
+                      {k: recs[k].T_wc.copy() for k in self._window.keyframe_ids})  # fmt: skip
 
     def _refined_poses(self) -> np.ndarray:
         """T_wc of every recorded frame from its pose relative to its keyframe and that keyframe's pose now."""

@@ -42,9 +42,9 @@ class MemorySink:
 class MultiSink:
     """Forwards every call to each of ``sinks`` in order.
 
-    The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers) and ``on_initial_map``
-    exist only when at least one of ``sinks`` has them, and go to those; so a fan-out to sinks without them costs the
-    odometry nothing.
+    The optional ``on_frame_info`` (:class:`~dmtrack.odometry.sink.FrameInfo`, for viewers), ``on_initial_map``,
+    ``on_relocalised`` and ``on_window`` exist only when at least one of ``sinks`` has them, and go to those; so a
+    fan-out to sinks without them costs the odometry nothing.
     The children are fixed when the MultiSink is made. :meth:`close` closes each of them even when one fails.
     """
 
@@ -59,6 +59,13 @@ class MultiSink:
         self._reloc_sinks = [s for s in self.sinks if callable(getattr(s, "on_relocalised", None))]
         if self._reloc_sinks:
             self.on_relocalised = self._forward_relocalised
+        self._window_sinks = [s for s in self.sinks if callable(getattr(s, "on_window", None))]
+        if self._window_sinks:
+            self.on_window = self._forward_window
+
+    def _forward_window(self, *args: Any) -> None:
+        for s in self._window_sinks:
+            s.on_window(*args)  # type: ignore[attr-defined]
 
     def _forward_relocalised(self, *args: Any) -> None:
         for s in self._reloc_sinks:

@@ -481,6 +481,14 @@ class RerunSink:
         self.stream.log("log", rr.TextLog(f"relocalised at frame {frame_index} on keyframe {keyframe_id}, lost since "
                                           f"frame {lost_since}", level=rr.TextLogLevel.INFO))  # fmt: skip
 
+    def on_window(self, frame_index: int, timestamp: float, poses: dict[int, np.ndarray]) -> None:
+        """The sliding window after an optimisation: its keyframes' positions, joined in order, in orange."""
+        rr = self.rr
+        self._at(frame_index, timestamp)
+        pts = np.array([np.asarray(poses[k], np.float64)[:3, 3] for k in sorted(poses)], np.float32)
+        self.stream.log("world/window", rr.LineStrips3D([pts], colors=[[255, 140, 0]], radii=[-2.0]))
+        self.stream.log("world/window/keyframes", rr.Points3D(pts, colors=[[255, 140, 0]], radii=[-5.0]))
+
     def on_frame_info(self, info: FrameInfo) -> None:
         """The frame's image, the keyframe's inverse depth and the tracker's numbers."""
         rr, k = self.rr, self.image_downscale

@@ -202,24 +202,18 @@ def pair_normal_equations(
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def schur_solve(
-    H: np.ndarray, b: np.ndarray, hpp: np.ndarray, bp: np.ndarray, Hcp: np.ndarray, lam: float
-) -> tuple[np.ndarray, np.ndarray, bool]:  # pragma: no cover - compiled
-    """Solve the damped normal equations for the steps (δc, δp) = −H⁻¹b with the point block eliminated.
-
-    Damping: every diagonal entry × (1 + λ). Points with no information (hpp ≤ 0) get no step. Returns δc, δp and
-    whether the reduced system was positive definite (its Cholesky factor exists)."""
+def schur_reduce(
+    H: np.ndarray, b: np.ndarray, hpp: np.ndarray, bp: np.ndarray, Hcp: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The reduced system (H − Σ_p Hcp_p Hcp_pᵀ / hpp_p, b − Σ_p Hcp_p bp_p / hpp_p) over the points with information
+    (hpp > 0), in a fixed order."""
     n = H.shape[0]
     A = H.copy()
     r = b.copy()
-    for j in range(n):
-        A[j, j] *= 1.0 + lam
-    hd = np.empty(hpp.shape[0])
     for p in range(hpp.shape[0]):
-        hd[p] = hpp[p] * (1.0 + lam)
-        if not hd[p] > 0.0:
+        if not hpp[p] > 0.0:
             continue
-        inv = 1.0 / hd[p]
+        inv = 1.0 / hpp[p]
         for j in range(n):
             hj = Hcp[p, j]
             if hj == 0.0:
@@ -228,6 +222,25 @@ def schur_solve(
             r[j] -= f * bp[p]
             for k in range(n):
                 A[j, k] -= f * Hcp[p, k]
+    return A, r
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def schur_solve(
+    H: np.ndarray, b: np.ndarray, hpp: np.ndarray, bp: np.ndarray, Hcp: np.ndarray, lam: float
+) -> tuple[np.ndarray, np.ndarray, bool]:  # pragma: no cover - compiled
+    """Solve the damped normal equations for the steps (δc, δp) = −H⁻¹b with the point block eliminated.
+
+    Damping: every diagonal entry × (1 + λ). Points with no information (hpp ≤ 0) get no step. Returns δc, δp and
+    whether the reduced system was positive definite (its Cholesky factor exists)."""
+    n = H.shape[0]
+    Hd = H.copy()
+    for j in range(n):
+        Hd[j, j] *= 1.0 + lam
+    hd = np.empty(hpp.shape[0])
+    for p in range(hpp.shape[0]):
+        hd[p] = hpp[p] * (1.0 + lam)
+    A, r = schur_reduce(Hd, b, hd, bp, Hcp)
     x, ok = cholesky_solve(A, -r)
     dp = np.zeros(hpp.shape[0])
     for p in range(hpp.shape[0]):
@@ -404,3 +417,39 @@ def pair_normal_equations_numpy(
     np.add.at(bp, rows[has], bl[has, 16])
     for j, c in zip(sel, gc, strict=True):
         np.add.at(Hcp[:, c], rows[has], Hl[has, j, 16])
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def se3_log(T: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """ξ = (υ, ω) with exp(ξ) = T for a 4×4 rigid transform (rotation angle below π; loops in a fixed order)."""
+    R = T[:3, :3]
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) * 0.5
+    c = min(max(c, -1.0), 1.0)
+    th = math.acos(c)
+    if th < 1e-10:
+        f = 0.5
+    else:
+        f = th / (2.0 * math.sin(th))
+    w = np.array([f * (R[2, 1] - R[1, 2]), f * (R[0, 2] - R[2, 0]), f * (R[1, 0] - R[0, 1])])
+    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    W2 = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += W[i, k] * W[k, j]
+            W2[i, j] = acc
+    th2 = th * th
+    if th < 1e-5:
+        g = 1.0 / 12.0
+    else:
+        g = (1.0 - th * math.sin(th) / (2.0 * (1.0 - math.cos(th)))) / th2
+    out = np.empty(6)
+    for i in range(3):  # V⁻¹ = I − ½W + g W²
+        acc = 0.0
+        for j in range(3):
+            Vi = (1.0 if i == j else 0.0) - 0.5 * W[i, j] + g * W2[i, j]
+            acc += Vi * T[j, 3]
+        out[i] = acc
+    out[3], out[4], out[5] = w[0], w[1], w[2]
+    return out

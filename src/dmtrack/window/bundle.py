@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dmtrack.geometry.exact import matmul
+from dmtrack.geometry.exact import dot, matmul
 from dmtrack.odometry.config import WindowConfig
 from dmtrack.window import _kernels as kern
 
@@ -108,6 +108,50 @@ def sample_points(frame: Any, idepth: np.ndarray, var: np.ndarray, config: Windo
     return HostPoints(x0, y0, dm, v[ys, xs].astype(np.float64), dm.copy())
 
 
+class MarginalPrior:
+    """The Gaussian prior that keyframes which left the window leave on the others' poses: cost 2bᵀδ + δᵀHδ (the
+    quadratic model of the photometric cost has this form), δ = log(T_cw T0⁻¹) per keyframe, against the poses T0 at
+    which it was linearised."""
+
+    def __init__(self, ids: list[int], T0: list[np.ndarray], H: np.ndarray, b: np.ndarray):
+        self.ids, self.T0, self.H, self.b = ids, T0, H, b
+
+    def add(self, kfs: list[WindowKeyframe], poses: list[np.ndarray], pose_cols: Any,
+            system: tuple[Any, ...] | None) -> float:  # fmt: skip
+        """Add the prior at ``poses`` to ``system`` (its H and b, if given); return its cost."""
+        where = {kf.keyframe_id: i for i, kf in enumerate(kfs)}
+        idx = [(k, where[kid]) for k, kid in enumerate(self.ids) if kid in where]
+        delta = np.zeros(self.b.size)
+        for k, i in idx:
+            delta[6 * k : 6 * k + 6] = kern.se3_log(matmul(poses[i], _inv(self.T0[k])))
+        Hd = matmul(self.H, delta)
+        cost = 2.0 * dot(self.b, delta) + dot(delta, Hd)
+        if system is not None:
+            g = self.b + Hd
+            for k, i in idx:
+                ci = pose_cols(i)[0]
+                system[1][ci : ci + 6] += g[6 * k : 6 * k + 6]
+                for m, j in idx:
+                    cj = pose_cols(j)[0]
+                    system[0][ci : ci + 6, cj : cj + 6] += self.H[6 * k : 6 * k + 6, 6 * m : 6 * m + 6]
+        return cost
+
+
+def _eliminate_first(A: np.ndarray, r: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Schur complement of (A, r) over its first ``m`` variables (Cholesky; a block that nothing constrains is
+    damped by 1e-9 of its trace)."""
+    Amm = A[:m, :m].copy()
+    eps = 1e-9 * max(float(np.trace(Amm)), 1e-300)
+    for k in range(m):
+        Amm[k, k] += eps
+    Arm = np.ascontiguousarray(A[m:, :m])
+    X = np.empty((m, A.shape[0] - m))  # Amm⁻¹ Amr
+    for j in range(A.shape[0] - m):
+        X[:, j], _ = kern.cholesky_solve(Amm, np.ascontiguousarray(Arm[j]))
+    y, _ = kern.cholesky_solve(Amm, np.ascontiguousarray(r[:m]))
+    return A[m:, m:] - matmul(Arm, X), r[m:] - matmul(Arm, y)
+
+
 def _inv(T: np.ndarray) -> np.ndarray:
     Ti = np.eye(4)
     Ti[:3, :3] = T[:3, :3].T
@@ -148,18 +192,37 @@ class PhotometricBundle:
         self.basis = np.asarray(basis, np.float64)  # δK = B δθ
         self.params = np.array([residual_factor, 1.0 / noise2, config.huber, config.outlier], np.float64)
         self.use_numba = use_numba
+        self.marginal: MarginalPrior | None = None  # with leave = "marginalise", once a keyframe has left
+
+    # ------------------------------------------------------------------ layout
+    def anchored(self) -> bool:
+        """Whether the window's oldest keyframe is held fixed with its points (the gauge): always with
+        ``leave = "fixed"``; with ``"marginalise"`` until a keyframe has left and its prior holds the gauge."""
+        return self.marginal is None
+
+    def _n_pose(self, n_kf: int) -> int:
+        return 6 * (n_kf - 1) if self.anchored() else 6 * n_kf
+
+    def _pose_cols(self, i: int) -> list[int]:
+        if self.anchored():
+            return list(range(6 * (i - 1), 6 * i)) if i > 0 else [-1] * 6
+        return list(range(6 * i, 6 * i + 6))
+
+    def _free_points(self, i: int) -> bool:
+        return i > 0 or not self.anchored()
 
     # ------------------------------------------------------------------ one evaluation
     def _system(self, kfs: list[WindowKeyframe], poses: list[np.ndarray], depths: list[np.ndarray | None],
-                K: np.ndarray, level: int, cost_only: bool) -> tuple[Any, ...]:  # fmt: skip
+                K: np.ndarray, level: int, cost_only: bool,
+                hosts: set[int] | None = None) -> tuple[Any, ...]:  # fmt: skip
         refine = self.config.refine_intrinsics
-        n_pose = 6 * (len(kfs) - 1)
+        n_pose = self._n_pose(len(kfs))
         n = n_pose + (4 if refine else 0)
         offsets = []
         rows = 0
         for i, kf in enumerate(kfs):
             offsets.append(rows)
-            if i > 0 and kf.points is not None:
+            if self._free_points(i) and kf.points is not None:
                 rows += kf.points.count
         H, b = np.zeros((n, n)), np.zeros(n)
         hpp, bp, Hcp = np.zeros(rows), np.zeros(rows), np.zeros((rows, n))
@@ -171,14 +234,15 @@ class PhotometricBundle:
         fn = kern.pair_normal_equations if self.use_numba else kern.pair_normal_equations_numpy
         for i, host in enumerate(kfs):
             pts = host.points
-            if pts is None or pts.count == 0:
+            if pts is None or pts.count == 0 or (hosts is not None and i not in hosts):
                 continue
             ref = pts.ref.get(level)
             xs, ys = pts.at_level(level)
             if ref is None:
                 ref = kern.sample_values(host.frame.levels[level].packed, xs, ys)
                 pts.ref[level] = ref
-            prow = (np.arange(pts.count, dtype=np.int64) + offsets[i]) if i > 0 else np.full(pts.count, -1, np.int64)
+            free = self._free_points(i)
+            prow = (np.arange(pts.count, dtype=np.int64) + offsets[i]) if free else np.full(pts.count, -1, np.int64)
             T_hw_inv = _inv(poses[i])
             d = depths[i]
             assert d is not None
@@ -186,20 +250,20 @@ class PhotometricBundle:
                 if j == i:
                     continue
                 T_th = matmul(poses[j], T_hw_inv)
-                hc = list(range(6 * (i - 1), 6 * i)) if i > 0 else [-1] * 6
-                tc = list(range(6 * (j - 1), 6 * j)) if j > 0 else [-1] * 6
-                cols = np.array(hc + tc + k_cols, np.int64)
+                cols = np.array(self._pose_cols(i) + self._pose_cols(j) + k_cols, np.int64)
                 fn(target.frame.levels[level].packed, xs, ys, d, ref, prow, T_th, cam, cols, self.params,
                    H, b, hpp, bp, Hcp, stats, cost_only)  # fmt: skip
         return H, b, hpp, bp, Hcp, stats, offsets
 
-    def _priors(self, kfs: list[WindowKeyframe], depths: list[np.ndarray | None], d_start: list[np.ndarray | None],
-                K: np.ndarray, system: tuple[Any, ...] | None) -> float:  # fmt: skip
-        """Add the depth and intrinsics priors to ``system`` (if given); return their cost."""
+    def _priors(self, kfs: list[WindowKeyframe], poses: list[np.ndarray], depths: list[np.ndarray | None],
+                d_start: list[np.ndarray | None], K: np.ndarray, system: tuple[Any, ...] | None,
+                hosts: set[int] | None = None) -> float:  # fmt: skip
+        """Add the depth, intrinsics and marginal priors to ``system`` (if given); return their cost. With ``hosts``
+        only the depth priors of those keyframes' points."""
         cost = 0.0
         w0 = self.config.depth_prior
         for i, kf in enumerate(kfs):
-            if i == 0 or kf.points is None or w0 <= 0:
+            if not self._free_points(i) or kf.points is None or w0 <= 0 or (hosts is not None and i not in hosts):
                 continue
             d, d0 = depths[i], d_start[i]
             assert d is not None and d0 is not None
@@ -210,8 +274,10 @@ class PhotometricBundle:
                 off = system[6][i]
                 system[2][off : off + d.size] += wp
                 system[3][off : off + d.size] += wp * r
+        if hosts is not None:
+            return cost
+        n_pose = self._n_pose(len(kfs))
         if self.config.refine_intrinsics:
-            n_pose = 6 * (len(kfs) - 1)
             iv = 1.0 / (self.prior_sigma * self.prior_sigma)
             r = K - self.prior
             cost += float(np.sum(iv * r * r))
@@ -219,12 +285,14 @@ class PhotometricBundle:
                 for k in range(4):
                     system[0][n_pose + k, n_pose + k] += iv[k]
                     system[1][n_pose + k] += iv[k] * r[k]
+        if self.marginal is not None:
+            cost += self.marginal.add(kfs, poses, self._pose_cols, system)
         return cost
 
     # ------------------------------------------------------------------ the optimisation
     def optimise(self, kfs: list[WindowKeyframe]) -> BundleReport:
-        """Optimise the window in place: ``T_cw`` of every keyframe but the first, ``points.d`` of every host but the
-        first, and :attr:`intrinsics` when they are estimated; coarse to fine over ``config.levels``."""
+        """Optimise the window in place — ``T_cw`` and ``points.d`` of every keyframe but an anchor (see
+        :meth:`anchored`), and :attr:`intrinsics` when they are estimated — coarse to fine over ``config.levels``."""
         poses = [np.array(kf.T_cw, np.float64) for kf in kfs]
         depths = [None if kf.points is None else kf.points.d.copy() for kf in kfs]
         d_start = [None if d is None else d.copy() for d in depths]
@@ -232,30 +300,31 @@ class PhotometricBundle:
         first_cost = None
         its = 0
         last = None
+        n_pose = self._n_pose(len(kfs))
         for level in self.config.levels:
             lam = 1e-2
             sysm = self._system(kfs, poses, depths, K, level, False)
-            cost = float(sysm[5][kern.S_COST]) + self._priors(kfs, depths, d_start, K, sysm)
+            cost = float(sysm[5][kern.S_COST]) + self._priors(kfs, poses, depths, d_start, K, sysm)
             if first_cost is None:
                 first_cost = cost
             for _ in range(self.config.iterations):
-                dc, dp, ok = kern.schur_solve(*self._in_basis(sysm, len(kfs)), lam)
+                dc, dp, ok = kern.schur_solve(*self._in_basis(sysm, n_pose), lam)
                 if not ok:
                     lam *= 10.0
                     continue
                 if self.config.refine_intrinsics:
-                    n_pose = 6 * (len(kfs) - 1)
                     dc = np.concatenate([dc[:n_pose], matmul(self.basis, dc[n_pose:])])
                 new_poses, new_depths, new_K = self._step(kfs, poses, depths, K, dc, dp, sysm[6])
                 trial = self._system(kfs, new_poses, new_depths, new_K, level, True)
-                new_cost = float(trial[5][kern.S_COST]) + self._priors(kfs, new_depths, d_start, new_K, None)
+                new_cost = float(trial[5][kern.S_COST]) + self._priors(kfs, new_poses, new_depths, d_start, new_K,
+                                                                       None)  # fmt: skip
                 if new_cost < cost:
-                    converged = cost - new_cost < 1e-4 * cost
+                    converged = cost - new_cost < 1e-4 * abs(cost)
                     poses, depths, K = new_poses, new_depths, new_K
                     lam = max(lam * 0.5, 1e-6)
                     its += 1
                     sysm = self._system(kfs, poses, depths, K, level, False)
-                    cost = float(sysm[5][kern.S_COST]) + self._priors(kfs, depths, d_start, K, sysm)
+                    cost = float(sysm[5][kern.S_COST]) + self._priors(kfs, poses, depths, d_start, K, sysm)
                     if converged:
                         break
                 else:
@@ -263,38 +332,62 @@ class PhotometricBundle:
             last = (sysm, cost)
         assert last is not None and first_cost is not None
         sysm, cost = last
-        for kf, T, d in zip(kfs[1:], poses[1:], depths[1:], strict=True):
+        for i, (kf, T, d) in enumerate(zip(kfs, poses, depths, strict=True)):
             kf.T_cw = T
-            if kf.points is not None and d is not None:
+            if kf.points is not None and d is not None and self._free_points(i):
                 kf.points.d = d
         report = BundleReport(first_cost, cost, its, int(sysm[5][kern.S_IN]), int(sysm[5][kern.S_OUT]))
         if self.config.refine_intrinsics:
             self.intrinsics = K
             report.intrinsics = K.copy()
-            report.intrinsics_sigma = self._intrinsics_sigma(sysm, len(kfs))
+            report.intrinsics_sigma = self._intrinsics_sigma(sysm, n_pose)
         return report
+
+    def marginalise(self, kfs: list[WindowKeyframe]) -> None:
+        """The oldest keyframe ``kfs[0]`` leaves with ``leave = "marginalise"``: the residuals of its points (at the
+        finest level, with their depth prior) and the marginal prior so far are linearised at the current estimate,
+        its points and its pose eliminated (Schur complement), and what is left becomes the Gaussian prior on the other
+        keyframes' poses, each linearised at its pose now and kept there (first-estimate Jacobians for the prior). The
+        residuals of other points in the leaving keyframe are dropped, as DSO drops them. The intrinsics are held at
+        their estimate."""
+        if self.config.leave != "marginalise" or len(kfs) < 2:
+            return
+        poses = [np.array(kf.T_cw, np.float64) for kf in kfs]
+        depths = [None if kf.points is None else kf.points.d.copy() for kf in kfs]
+        n_pose = self._n_pose(len(kfs))
+        sysm = self._system(kfs, poses, depths, self.intrinsics, self.config.levels[-1], False, hosts={0})
+        self._priors(kfs, poses, depths, depths, self.intrinsics, sysm, hosts={0})
+        H = np.ascontiguousarray(sysm[0][:n_pose, :n_pose])
+        b = sysm[1][:n_pose].copy()
+        if self.marginal is not None:
+            self.marginal.add(kfs, poses, self._pose_cols, (H, b))
+        A, r = kern.schur_reduce(H, b, sysm[2], sysm[3], np.ascontiguousarray(sysm[4][:, :n_pose]))
+        if not self.anchored():  # the leaving keyframe's pose: the first six columns
+            A, r = _eliminate_first(A, r, 6)
+        self.marginal = MarginalPrior([kf.keyframe_id for kf in kfs[1:]], [p.copy() for p in poses[1:]], A, r)
 
     def _step(self, kfs: list[WindowKeyframe], poses: list[np.ndarray], depths: list[np.ndarray | None],
               K: np.ndarray, dc: np.ndarray, dp: np.ndarray, offsets: list[int]) -> tuple[Any, Any, Any]:  # fmt: skip
-        new_poses = [poses[0]] + [kern.se3_left_update(poses[i], dc[6 * (i - 1) : 6 * i]) for i in range(1, len(kfs))]
-        new_depths: list[np.ndarray | None] = [depths[0]]
-        for i in range(1, len(kfs)):
+        new_poses = []
+        new_depths: list[np.ndarray | None] = []
+        for i in range(len(kfs)):
+            cols = self._pose_cols(i)
+            new_poses.append(poses[i] if cols[0] < 0 else kern.se3_left_update(poses[i], dc[cols[0] : cols[0] + 6]))
             d = depths[i]
-            if d is None:
-                new_depths.append(None)
+            if d is None or not self._free_points(i):
+                new_depths.append(d)
                 continue
             nd = d + dp[offsets[i] : offsets[i] + d.size]
             new_depths.append(np.where(nd > 1e-3 * d, nd, 1e-3 * d))  # an inverse depth stays positive
-        new_K = K + dc[6 * (len(kfs) - 1) :] if self.config.refine_intrinsics else K
+        new_K = K + dc[self._n_pose(len(kfs)) :] if self.config.refine_intrinsics else K
         return new_poses, new_depths, new_K
 
-    def _in_basis(self, sysm: tuple[Any, ...], n_kf: int) -> tuple[np.ndarray, ...]:
+    def _in_basis(self, sysm: tuple[Any, ...], n_pose: int) -> tuple[np.ndarray, ...]:
         """(H, b, hpp, bp, Hcp) with the intrinsics' four columns replaced by those of the estimated parameters θ
         (δK = B δθ, :attr:`basis`)."""
         H, b, hpp, bp, Hcp = sysm[:5]
         if not self.config.refine_intrinsics:
             return H, b, hpp, bp, Hcp
-        n_pose = 6 * (n_kf - 1)
         B = self.basis
         nk = B.shape[1]
         T = np.zeros((n_pose + 4, n_pose + nk))
@@ -303,12 +396,11 @@ class PhotometricBundle:
         Ht = matmul(matmul(T.T, H), T)
         return Ht, matmul(T.T, b), hpp, bp, np.ascontiguousarray(matmul(Hcp, T))
 
-    def _intrinsics_sigma(self, sysm: tuple[Any, ...], n_kf: int) -> np.ndarray:
+    def _intrinsics_sigma(self, sysm: tuple[Any, ...], n_pose: int) -> np.ndarray:
         """Standard deviations of the intrinsics: B Σ_θ Bᵀ, Σ_θ the θ block of the inverse of the Schur-reduced
         system."""
-        H, b, hpp, bp, Hcp = self._in_basis(sysm, n_kf)
+        H, b, hpp, bp, Hcp = self._in_basis(sysm, n_pose)
         n = H.shape[0]
-        n_pose = 6 * (n_kf - 1)
         nk = n - n_pose
         A = H.copy()
         inv = np.where(hpp > 0, 1.0 / np.where(hpp > 0, hpp, 1.0), 0.0)

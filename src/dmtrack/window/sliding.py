@@ -28,10 +28,13 @@ __all__ = ["SlidingWindow", "WindowStats"]
 
 @dataclass
 class WindowStats:
-    """What the window did over a run: optimisations, their total time, the cost reduction, and the intrinsics'
-    estimates (one per optimisation, with their standard deviations) when they were refined."""
+    """What the window did over a run: optimisations, keyframes that left it during the run (and how: ``leave``), the
+    total time, the cost reduction, and the intrinsics' estimates (one per optimisation, with their standard
+    deviations) when they were refined."""
 
     optimisations: int = 0
+    left: int = 0
+    leave: str = "fixed"
     time_ms: float = 0.0
     cost_ratio: list[float] = field(default_factory=list)
     intrinsics: list[np.ndarray] = field(default_factory=list)
@@ -54,6 +57,8 @@ class WindowStats:
         """The numbers for ``metrics.json``."""
         out: dict[str, Any] = {
             "optimisations": self.optimisations,
+            "left": self.left,
+            "leave": self.leave,
             "ms_per_optimisation": self.time_ms / self.optimisations if self.optimisations else 0.0,
             "median_cost_ratio": float(np.median(self.cost_ratio)) if self.cost_ratio else None,
         }
@@ -89,7 +94,7 @@ class SlidingWindow:
                                         use_numba)  # fmt: skip
         self._channels: int | None = None
         self.keyframes: list[WindowKeyframe] = []
-        self.stats = WindowStats()
+        self.stats = WindowStats(leave=self.config.leave)
         self.last_report: BundleReport | None = None
 
     @property
@@ -101,6 +106,7 @@ class SlidingWindow:
         """Every keyframe leaves."""
         left = [kf.keyframe_id for kf in self.keyframes]
         self.keyframes = []
+        self.bundle.marginal = None
         return WindowUpdate({}, left)
 
     def start(self, keyframe_id: int, frame: Any, T_wc: np.ndarray, scale: float) -> WindowUpdate:
@@ -137,12 +143,15 @@ class SlidingWindow:
             if report.intrinsics is not None and report.intrinsics_sigma is not None:
                 self.stats.intrinsics.append(report.intrinsics)
                 self.stats.intrinsics_sigma.append(report.intrinsics_sigma)
-            for kf in self.keyframes[1:-1]:  # a finished keyframe's units: its map's inverse depths over the optimised
+            moved = self.keyframes if not self.bundle.anchored() else self.keyframes[1:]
+            for kf in moved[:-1]:  # a finished keyframe's units: its map's inverse depths over the optimised ones
                 if kf.points is not None and kf.points.count:
                     kf.scale = float(np.median(kf.points.d_map / kf.points.d))
-            update.poses = {kf.keyframe_id: (_inv_se3(kf.T_cw), kf.scale) for kf in self.keyframes[1:]}
+            update.poses = {kf.keyframe_id: (_inv_se3(kf.T_cw), kf.scale) for kf in moved}
         while len(self.keyframes) > self.config.size:
+            self.bundle.marginalise(self.keyframes)
             update.left.append(self.keyframes.pop(0).keyframe_id)
+            self.stats.left += 1
         self.stats.time_ms += 1e3 * (time.perf_counter() - t0)
         return update
 

@@ -21,6 +21,7 @@ from dmtrack.evaluation.html.figures import Curve, Line, rpe_figure, topview_fig
 from dmtrack.evaluation.html.losses import has_losses, losses_section, lost_summary, relocalised_line
 from dmtrack.evaluation.html.page import Page, axis_basis_text, base_layout, colour, esc, key_value_table, thin
 from dmtrack.evaluation.html.slam import SlamTracks, is_slam_run, slam_section
+from dmtrack.evaluation.html.window import window_section
 from dmtrack.evaluation.rankings import value_of
 from dmtrack.evaluation.tables import fmt_value
 from dmtrack.io.bench_layout import GROUNDTRUTH_TXT, METRICS_JSON, RUN_INFO_JSON, TRAJECTORY_TXT, length_unit, read_json
@@ -342,6 +343,7 @@ def run_page(folder: Path, page: Page) -> str:
     has_gt = (folder / GROUNDTRUTH_TXT).is_file()
     _header(page, m, info, unit, has_gt)
     _metrics(page, m, unit, has_gt)
+    window_section(page, m)
     tracks = _Tracks(folder, m, page)
     slam = SlamTracks(folder, tracks, page) if is_slam_run(folder, m) else None
     if slam is not None:

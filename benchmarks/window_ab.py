@@ -5,7 +5,8 @@ Usage::
     python benchmarks/window_ab.py [--features gray,bitplanes] [--sets tune|held|all|NAME,...]
         [--variant NAME=KEY=VALUE;KEY=VALUE ...] [--jobs 2] [--json FILE]
 
-Variants are ``--set`` overrides of ``dmtrack run``; ``off`` (``window.size=0``) is always run. The run sets:
+Variants are ``--set`` overrides of ``dmtrack run`` (or options ``--NAME=VALUE``, e.g.
+``--intrinsics=579.5,579.5,320,240``); ``off`` (``window.size=0``) is always run. The run sets:
 
 * ``tune``: 7-Scenes 0–349 and two rendered sequences (``synthetic:``) — where the window's settings were chosen;
 * ``held``: 7-Scenes 350–699 started at 350; the start scan's starts 50, 100, …, 500 of 7-Scenes, 160 frames each;
@@ -32,6 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data"
 SEVEN = str(SHARED / "7scenes-0000-0699")
 RUNS: dict[str, list[str]] = {
+    "7s-0-699": [SEVEN],
     "7s-0-349": [SEVEN, "--max-frames", "350"],
     "7s-350-699": [SEVEN, "--start", "350"],
     **{f"scan-{s}": [SEVEN, "--start", str(s), "--max-frames", "160"] for s in range(50, 501, 50)},
@@ -55,8 +57,8 @@ def _run(job: tuple[str, str, str, list[str]]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "dmtrack.cli", "run", *RUNS[run], "--feature", feature, "--out", tmp,
                "--no-progress", "--no-pointcloud", "--no-depth-images"]  # fmt: skip
-        for o in overrides:
-            cmd += ["--set", o]
+        for o in overrides:  # a --set override, or a raw option --NAME=VALUE
+            cmd += o.split("=", 1) if o.startswith("--") else ["--set", o]
         p = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
         mpath = Path(tmp) / "metrics.json"
         m = json.loads(mpath.read_text()) if mpath.exists() else {}

@@ -5,6 +5,7 @@ the same bytes for any thread count, and the window's figures in metrics.json.""
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import json
 
 import numpy as np
@@ -128,3 +129,23 @@ def test_marginalising_window_runs_through(frames) -> None:
     assert res.window["leave"] == "marginalise" and res.window["left"] == len(res.keyframes) - 3
     for rec, snap in zip(res.keyframes, sink.keyframes, strict=True):
         np.testing.assert_array_equal(rec.T_wc, snap.T_wc)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("gtsam") is None,
+                    reason="gtsam not installed (pip install 'dmtrack[slam]')")
+def test_slam_takes_the_window_keyframes(tmp_path) -> None:
+    """``--slam --window``: the back end gets each keyframe when it leaves the window, with its final pose, and places
+    the frames on the optimised graph from their poses on their keyframes (a keyframe's own frame is where the graph
+    put the keyframe)."""
+    from dmtrack.io.trajectory import read_tum
+    from dmtrack.pipeline import run_to_directory
+
+    out = tmp_path / "run"
+    cfg = VOConfig(init="groundtruth", window=WindowConfig(size=3, points=300))
+    result = run_to_directory("synthetic:n_frames=40,width=320,height=240", out, "gray", config=cfg, slam=True,
+                              pointcloud=False, depth_images=False)  # fmt: skip
+    assert result.metrics["window"]["optimisations"] >= 3
+    traj, kfs = read_tum(out / "trajectory.txt"), read_tum(out / "keyframes.txt")
+    assert len(traj) == result.tracked_frames and len(kfs) == result.metrics["keyframes"]
+    for t, T in zip(kfs.timestamps, kfs.poses, strict=True):
+        np.testing.assert_allclose(traj.poses[int(np.argmin(np.abs(traj.timestamps - t)))], T, atol=1e-6)

@@ -313,6 +313,9 @@ class SequenceRun:
             )
             trajectory = vo_trajectory = Trajectory(vo_result.timestamps, vo_result.poses)
             if slam is not None and slam.error is None:  # the optimised trajectory and keyframes
+                if vo_result.window is not None:  # frames placed on their keyframes' final poses, as the graph's are
+                    slam.backend.frames = list(zip(vo_result.indices.tolist(), vo_result.timestamps.tolist(),
+                                                   vo_result.poses, strict=True))  # fmt: skip
                 _, ts, poses = slam.backend.trajectory()
                 trajectory = Trajectory(ts, poses)
                 kfs = slam.backend.keyframe_trajectory()

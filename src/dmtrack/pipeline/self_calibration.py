@@ -4,7 +4,7 @@ The odometry runs with the sliding window estimating the focal length (and, if a
 photometric residuals of its keyframes (:mod:`dmtrack.window`, ``window.refine_intrinsics``). One run's estimate is
 pulled towards the calibration it was tracked with — the keyframes' poses and depth maps were made with it — so the
 run is repeated with each estimate until it changes by less than ``tolerance`` (a fixed point; on 7-Scenes, started at
-525 and at 585, both ends meet near 578: docs/window.md). The result is written as the ``fx fy cx cy`` file that
+525 and at 585, both ends meet at 579.3–579.6: docs/window.md). The result is written as the ``fx fy cx cy`` file that
 ``dmtrack run --intrinsics FILE`` reads.
 """
 

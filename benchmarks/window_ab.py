@@ -109,8 +109,10 @@ def main() -> None:
     ap.add_argument("--variant", action="append", default=[], help="NAME=KEY=VALUE;KEY=VALUE")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--skip-off", action="store_true", help="do not run 'off' (its rows from an earlier --json)")
+    ap.add_argument("--off-from", type=Path, help="a JSON of an earlier run whose 'off' rows are reused")
     a = ap.parse_args()
-    variants = {"off": ["window.size=0"]}
+    variants = {} if a.skip_off or a.off_from else {"off": ["window.size=0"]}
     for v in a.variant or ["on=window.size=6"]:
         name, _, sets = v.partition("=")
         variants[name] = [s for s in sets.split(";") if s]
@@ -119,6 +121,9 @@ def main() -> None:
     jobs = [(r, f, n, o) for r in runs for f in a.features.split(",") for n, o in variants.items()]
     with ThreadPoolExecutor(a.jobs) as ex:
         rows = list(ex.map(_run, jobs))
+    if a.off_from:  # the odometry alone does not depend on the window's code: the same bytes as then
+        rows = [r for r in json.loads(a.off_from.read_text())["rows"] if r["variant"] == "off" and r["run"] in runs
+                and r["feature"] in a.features.split(",")] + rows  # fmt: skip
     print(table(rows, sets))
     if a.json:
         a.json.parent.mkdir(parents=True, exist_ok=True)

@@ -149,3 +149,17 @@ def test_slam_takes_the_window_keyframes(tmp_path) -> None:
     assert len(traj) == result.tracked_frames and len(kfs) == result.metrics["keyframes"]
     for t, T in zip(kfs.timestamps, kfs.poses, strict=True):
         np.testing.assert_allclose(traj.poses[int(np.argmin(np.abs(traj.timestamps - t)))], T, atol=1e-6)
+
+
+def test_a_rejected_optimisation_leaves_the_odometry_alone(frames) -> None:
+    """An optimisation whose residuals are mostly outliers is dropped and the window begins anew: with a threshold no
+    optimisation can meet, every one is rejected, and the run is the odometry alone, byte for byte."""
+    strict = dataclasses.replace(CONFIG, window=WindowConfig(size=4, points=300, max_outliers=1e-9))
+    _, res, sink = _run(frames, strict, n=30)
+    _, alone, _ = _run(frames, VOConfig(init="groundtruth"), window=False, n=30)
+    assert res.window["optimisations"] >= 2 and res.window["rejected"] == res.window["optimisations"]
+    assert res.poses.tobytes() == alone.poses.tobytes()
+    assert [k.T_wc.tobytes() for k in res.keyframes] == [k.T_wc.tobytes() for k in alone.keyframes]
+    assert [k.keyframe_id for k in sink.keyframes] == list(range(len(res.keyframes)))
+    moved = dataclasses.replace(CONFIG, window=WindowConfig(size=4, points=300, max_move=1e-9))
+    assert _run(frames, moved, n=30)[1].window["rejected"] >= 1  # the new keyframe moved at all

@@ -350,6 +350,13 @@ class WindowConfig:
     """A residual norm above this counts as an outlier (no weight, a constant cost); grey levels."""
     depth_prior: float = 1.0
     """Weight of each point's inverse depth from the depth map as a prior (× 1/variance); 0: none."""
+    max_outliers: float = 0.5
+    """An optimisation is rejected — its result dropped and the window begun anew at the new keyframe — when more than
+    this fraction of its residuals end as outliers (on the chosen-on frames at most 0.39), …"""
+    max_move: float = 1.0
+    """… or when it moves the new keyframe away from its tracked pose by more than this many times the distance from
+    the finished keyframe to it (at most 0.48 on the chosen-on frames): a window that no longer explains its images
+    must not steer the odometry."""
     leave: str = "fixed"
     """What happens to a keyframe that leaves the window: ``"fixed"`` (it keeps its last estimate and no longer
     changes; the oldest keyframe in the window, with its points, is the fixed anchor) or ``"marginalise"`` (its
@@ -371,8 +378,10 @@ class WindowConfig:
             raise InputError("window.points and window.cell must be ≥ 1, window.iterations and sample_level ≥ 0")
         if not self.levels or list(self.levels) != sorted(set(self.levels), reverse=True) or min(self.levels) < 0:
             raise InputError(f"window.levels {self.levels} must be non-negative and strictly decreasing")
-        if not (self.huber > 0 and self.outlier > 0 and self.depth_prior >= 0 and self.intrinsics_prior > 0):
-            raise InputError("window.huber, outlier and intrinsics_prior must be > 0, depth_prior ≥ 0")
+        if not (self.huber > 0 and self.outlier > 0 and self.depth_prior >= 0 and self.intrinsics_prior > 0
+                and 0 < self.max_outliers <= 1 and self.max_move > 0):
+            raise InputError("window.huber, outlier, intrinsics_prior and max_move must be > 0, depth_prior ≥ 0, "
+                             "max_outliers in (0, 1]")
         if self.intrinsics_model not in INTRINSICS_MODELS:
             raise InputError(f"window.intrinsics_model must be one of {', '.join(INTRINSICS_MODELS)}, "
                              f"not {_short(self.intrinsics_model)}")  # fmt: skip

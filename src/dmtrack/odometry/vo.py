@@ -236,6 +236,7 @@ class VisualOdometry(LossHandling, WindowedKeyframes):
         self._window = window
         self._held = {}  # finished keyframes still in the window: id → (frame, depth map), emitted when they leave
         self._pose_refs = []  # with a window: (keyframe id, T_fk) of every recorded pose
+        self._moved = set()  # keyframes whose pose the window changed
 
     # ------------------------------------------------------------------ properties
     @property

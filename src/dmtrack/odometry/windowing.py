@@ -61,10 +61,12 @@ class WindowedKeyframes:
     _window: KeyframeWindow | None
     _held: dict[int, tuple[Any, Any]]
     _pose_refs: list[tuple[int, np.ndarray]]
+    _moved: set[int]
 
     def _window_apply(self, update: WindowUpdate) -> None:
         """Take the window's poses (the current keyframe's becomes the chain's) and emit the keyframes that left."""
         for kf_id, (T_wc, scale) in update.poses.items():
+            self._moved.add(kf_id)
             rec = self._keyframes[kf_id]  # type: ignore[attr-defined]
             rec.T_wc = np.array(T_wc, np.float64)
             rec.scale = float(scale)
@@ -116,6 +118,8 @@ class WindowedKeyframes:
         self._start_keyframe(frame, new_dm, matmul(S_wk, _sim3(_inv_se3(T_new_old), rho)), s_wk * rho, rho,  # type: ignore[attr-defined]
                              parent=old_id, regular=True)  # fmt: skip
         self._window.set_scale(new_id, s_wk * rho)
+        if new_pose is not None:  # placed by the window, not where its frame was tracked
+            self._moved.add(new_id)
         self._held[old_id] = (old_kf, old_dm)
         self._emit_left(update.left)
         on_window = getattr(self.sink, "on_window", None)  # type: ignore[attr-defined]
@@ -125,9 +129,11 @@ class WindowedKeyframes:
                       {k: recs[k].T_wc.copy() for k in self._window.keyframe_ids})  # fmt: skip
 
     def _refined_poses(self) -> np.ndarray:
-        """T_wc of every recorded frame from its pose relative to its keyframe and that keyframe's pose now."""
-        out = np.empty((len(self._pose_refs), 4, 4))
+        """T_wc of every recorded frame from its pose relative to its keyframe and that keyframe's pose now (the pose
+        recorded at the time where the window never moved the keyframe: the same bytes)."""
+        out = np.array(self._poses, dtype=np.float64).reshape(-1, 4, 4)  # type: ignore[attr-defined]
         for i, (kf_id, T_fk) in enumerate(self._pose_refs):
-            rec = self._keyframes[kf_id]  # type: ignore[attr-defined]
-            out[i] = _se3_part(matmul(_sim3(rec.T_wc, rec.scale), _inv_se3(T_fk)), rec.scale)
+            if kf_id in self._moved:
+                rec = self._keyframes[kf_id]  # type: ignore[attr-defined]
+                out[i] = _se3_part(matmul(_sim3(rec.T_wc, rec.scale), _inv_se3(T_fk)), rec.scale)
         return out

@@ -28,11 +28,13 @@ __all__ = ["SlidingWindow", "WindowStats"]
 
 @dataclass
 class WindowStats:
-    """What the window did over a run: optimisations, keyframes that left it during the run (and how: ``leave``), the
+    """What the window did over a run: optimisations, those rejected (``max_outliers``, ``max_move``: the window began
+    anew), keyframes that left it during the run (and how: ``leave``), the
     total time, the cost reduction, and the intrinsics' estimates (one per optimisation, with their standard
     deviations) when they were refined."""
 
     optimisations: int = 0
+    rejected: int = 0
     left: int = 0
     leave: str = "fixed"
     time_ms: float = 0.0
@@ -57,6 +59,7 @@ class WindowStats:
         """The numbers for ``metrics.json``."""
         out: dict[str, Any] = {
             "optimisations": self.optimisations,
+            "rejected": self.rejected,
             "left": self.left,
             "leave": self.leave,
             "ms_per_optimisation": self.time_ms / self.optimisations if self.optimisations else 0.0,
@@ -135,9 +138,20 @@ class SlidingWindow:
         self.keyframes.append(WindowKeyframe(keyframe_id, frame, _inv_se3(np.asarray(T_wc, np.float64)), float("nan")))
         update = WindowUpdate()
         if any(kf.points is not None for kf in self.keyframes):
+            saved = [(kf.T_cw, None if kf.points is None else kf.points.d.copy()) for kf in self.keyframes]
+            marginal = self.bundle.marginal
             report = self.bundle.optimise(self.keyframes)
             self.last_report = report
             self.stats.optimisations += 1
+            if self._implausible(report, T_wc):
+                for kf, (T, d) in zip(self.keyframes, saved, strict=True):
+                    kf.T_cw = T
+                    if d is not None and kf.points is not None:
+                        kf.points.d = d
+                self.bundle.marginal = marginal
+                self.stats.rejected += 1
+                self.stats.time_ms += 1e3 * (time.perf_counter() - t0)
+                return self._restart_at_newest()
             if report.cost_before > 0:
                 self.stats.cost_ratio.append(report.cost_after / report.cost_before)
             if report.intrinsics is not None and report.intrinsics_sigma is not None:
@@ -153,6 +167,24 @@ class SlidingWindow:
             update.left.append(self.keyframes.pop(0).keyframe_id)
             self.stats.left += 1
         self.stats.time_ms += 1e3 * (time.perf_counter() - t0)
+        return update
+
+    def _implausible(self, report: BundleReport, T_wc_tracked: np.ndarray) -> bool:
+        """Whether an optimisation's result must not be used (see ``max_outliers`` and ``max_move``)."""
+        n = report.inliers + report.outliers
+        if n == 0 or report.outliers > self.config.max_outliers * n:
+            return True
+        new, finished = self.keyframes[-1], self.keyframes[-2]
+        moved = _inv_se3(new.T_cw)[:3, 3] - np.asarray(T_wc_tracked, np.float64)[:3, 3]
+        baseline = np.asarray(T_wc_tracked, np.float64)[:3, 3] - _inv_se3(finished.T_cw)[:3, 3]
+        return bool(np.sqrt(np.sum(moved * moved)) > self.config.max_move * np.sqrt(np.sum(baseline * baseline)))
+
+    def _restart_at_newest(self) -> WindowUpdate:
+        """Every keyframe but the newest leaves with the estimate it had; the window begins anew from the newest."""
+        newest = self.keyframes[-1]
+        update = WindowUpdate({}, [kf.keyframe_id for kf in self.keyframes[:-1]])
+        self.keyframes = [newest]
+        self.bundle.marginal = None
         return update
 
     def set_scale(self, keyframe_id: int, scale: float) -> None:

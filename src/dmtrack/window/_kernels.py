@@ -1,5 +1,5 @@
 """Kernels of the window's photometric bundle adjustment: the normal equations of one (host, target) pair of
-keyframes, the Schur complement over the point depths and a small Cholesky solve.
+keyframes, the Schur complement over the point depths and a small LDLᵀ solve.
 
 Each point ``p`` of a host keyframe h (level-l pixel ``(x, y)``, inverse depth ``d`` in world units, its N feature
 values ``F_h``) is warped into a target keyframe t: ``m = ((x − c_x)/f_x, (y − c_y)/f_y, 1)``, ``q = R_th m + t_th d``
@@ -24,6 +24,8 @@ import math
 
 import numba
 import numpy as np
+
+from dmtrack.odometry._tracker_normal_equations import se3_exp, solve_damped
 
 #: Local parameter columns: host ξ 0–5, target ξ 6–11, intrinsics (f_x, c_x, f_y, c_y) 12–15, inverse depth 16.
 N_LOCAL = 17
@@ -232,7 +234,7 @@ def schur_solve(
     """Solve the damped normal equations for the steps (δc, δp) = −H⁻¹b with the point block eliminated.
 
     Damping: every diagonal entry × (1 + λ). Points with no information (hpp ≤ 0) get no step. Returns δc, δp and
-    whether the reduced system was positive definite (its Cholesky factor exists)."""
+    whether the reduced system was positive definite (its LDLᵀ factor exists)."""
     n = H.shape[0]
     Hd = H.copy()
     for j in range(n):
@@ -254,67 +256,16 @@ def schur_solve(
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def cholesky_solve(A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, bool]:  # pragma: no cover - compiled
-    """x with A x = y for a symmetric positive definite A (Cholesky, loops in a fixed order); (zeros, False) if A
-    is not positive definite."""
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        acc = A[j, j]
-        for k in range(j):
-            acc -= L[j, k] * L[j, k]
-        if not acc > 0.0:
-            return np.zeros(n), False
-        L[j, j] = math.sqrt(acc)
-        for i in range(j + 1, n):
-            acc = A[i, j]
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
-            L[i, j] = acc / L[j, j]
-    z = np.empty(n)
-    for i in range(n):
-        acc = y[i]
-        for k in range(i):
-            acc -= L[i, k] * z[k]
-        z[i] = acc / L[i, i]
-    x = np.empty(n)
-    for i in range(n - 1, -1, -1):
-        acc = z[i]
-        for k in range(i + 1, n):
-            acc -= L[k, i] * x[k]
-        x[i] = acc / L[i, i]
-    return x, True
+    """x with A x = y for a symmetric positive definite A (the tracker's LDLᵀ :func:`solve_damped`, undamped);
+    (zeros, False) if A is not positive definite."""
+    return solve_damped(A, y, 0.0)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def se3_left_update(T: np.ndarray, xi: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """exp(ξ) · T for a 4×4 rigid transform T and ξ = (υ, ω) (Rodrigues; loops in a fixed order)."""
-    wx, wy, wz = xi[3], xi[4], xi[5]
-    th2 = wx * wx + wy * wy + wz * wz
-    th = math.sqrt(th2)
-    if th < 1e-10:
-        a, bb, cc = 1.0, 0.5, 1.0 / 6.0
-    else:
-        a = math.sin(th) / th
-        bb = (1.0 - math.cos(th)) / th2
-        cc = (th - math.sin(th)) / (th2 * th)
-    W = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
-    W2 = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += W[i, k] * W[k, j]
-            W2[i, j] = acc
-    E = np.eye(4)
-    for i in range(3):
-        for j in range(3):
-            E[i, j] = (1.0 if i == j else 0.0) + a * W[i, j] + bb * W2[i, j]
-    for i in range(3):
-        acc = 0.0
-        for j in range(3):
-            V = (1.0 if i == j else 0.0) + bb * W[i, j] + cc * W2[i, j]
-            acc += V * xi[j]
-        E[i, 3] = acc
+    """exp(ξ) · T for a 4×4 rigid transform T and ξ = (υ, ω) (the tracker's :func:`se3_exp`; a product in a fixed
+    order)."""
+    E = se3_exp(xi)
     out = np.zeros((4, 4))
     for i in range(4):
         for j in range(4):

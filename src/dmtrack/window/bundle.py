@@ -138,7 +138,7 @@ class MarginalPrior:
 
 
 def _eliminate_first(A: np.ndarray, r: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """The Schur complement of (A, r) over its first ``m`` variables (Cholesky; a block that nothing constrains is
+    """The Schur complement of (A, r) over its first ``m`` variables (LDLᵀ; a block that nothing constrains is
     damped by 1e-9 of its trace)."""
     Amm = A[:m, :m].copy()
     eps = 1e-9 * max(float(np.trace(Amm)), 1e-300)

@@ -121,7 +121,7 @@ class WindowedKeyframes:
         if new_pose is not None:  # placed by the window, not where its frame was tracked
             self._moved.add(new_id)
         self._held[old_id] = (old_kf, old_dm)
-        self._emit_left(update.left)
+        self._emit_left(update.left)  # the finished keyframe too when the window began anew (a rejected optimisation)
         on_window = getattr(self.sink, "on_window", None)  # type: ignore[attr-defined]
         if on_window is not None:  # the window's keyframes as it left them (a viewer)
             recs = self._keyframes  # type: ignore[attr-defined]

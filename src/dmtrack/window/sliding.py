@@ -123,7 +123,9 @@ class SlidingWindow:
         """Sample the finished keyframe's points, add ``frame`` as the new keyframe (a target), optimise, let the
         oldest leave. The new keyframe's scale is set by :meth:`set_scale` once its map is made."""
         if not self.keyframes or self.keyframes[-1].keyframe_id != finished_id:  # not the window's: begin anew
-            return self.start(keyframe_id, frame, T_wc, float("nan"))
+            update = self.start(keyframe_id, frame, T_wc, float("nan"))
+            update.left.append(finished_id)  # it leaves at once
+            return update
         t0 = time.perf_counter()
         host = self.keyframes[-1]
         if self._channels != host.frame.n_channels:  # the channel rule's factor of Σ_c r_c² for this feature

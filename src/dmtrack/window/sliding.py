@@ -141,7 +141,7 @@ class SlidingWindow:
         update = WindowUpdate()
         if any(kf.points is not None for kf in self.keyframes):
             saved = [(kf.T_cw, None if kf.points is None else kf.points.d.copy()) for kf in self.keyframes]
-            marginal = self.bundle.marginal
+            marginal, intrinsics = self.bundle.marginal, self.bundle.intrinsics.copy()
             report = self.bundle.optimise(self.keyframes)
             self.last_report = report
             self.stats.optimisations += 1
@@ -150,7 +150,7 @@ class SlidingWindow:
                     kf.T_cw = T
                     if d is not None and kf.points is not None:
                         kf.points.d = d
-                self.bundle.marginal = marginal
+                self.bundle.marginal, self.bundle.intrinsics = marginal, intrinsics
                 self.stats.rejected += 1
                 self.stats.time_ms += 1e3 * (time.perf_counter() - t0)
                 return self._restart_at_newest()
@@ -185,6 +185,7 @@ class SlidingWindow:
         """Every keyframe but the newest leaves with the estimate it had; the window begins anew from the newest."""
         newest = self.keyframes[-1]
         update = WindowUpdate({}, [kf.keyframe_id for kf in self.keyframes[:-1]])
+        self.stats.left += len(update.left)
         self.keyframes = [newest]
         self.bundle.marginal = None
         return update

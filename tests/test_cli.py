@@ -213,3 +213,21 @@ def test_run_prints_the_compile_time_apart_from_the_speed(tmp_path: Path, sample
     assert len(speed) == 1 and speed[0].startswith(f"speed: {m['fps']:.1f} fps  (per frame: ")
     compiled = f"kernels compiled/loaded in {m['compile_s']:.1f} s before the first frame, not counted"
     assert speed[0].endswith(f"); {compiled}")
+
+
+def test_help_loads_no_heavy_module():
+    """``dmtrack --help`` builds every subcommand's parser without importing numba, scipy, torch, matplotlib, the
+    odometry or the pipeline (about 0.3 s; with the pipeline 1.0 s): a subcommand's parser lives where importing it
+    costs little, its command is imported when it runs. (numpy and cv2 still come with the dataset readers' parsers.)"""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from dmtrack.cli import build_parser\n"
+        "build_parser().format_help()\n"
+        "heavy = ('numba', 'scipy', 'torch', 'matplotlib', 'dmtrack.pipeline', 'dmtrack.odometry')\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m.startswith(heavy)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

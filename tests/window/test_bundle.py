@@ -76,13 +76,13 @@ def _pair_inputs(window, level=1, channels=1):
     return f1.levels[level].packed, xs, ys, pts.d * 1.01, ref, rows, T_th, camv
 
 
-@pytest.mark.parametrize("channels", [1, 3])
-def test_pair_kernel_equals_numpy_reference(window, channels) -> None:
+@pytest.mark.parametrize(("channels", "grad_c"), [(1, 0.0), (3, 0.0), (1, 50.0)])
+def test_pair_kernel_equals_numpy_reference(window, channels, grad_c) -> None:
     packed, xs, ys, d, ref, rows, T_th, camv = _pair_inputs(window, channels=channels)
     n = 16
     cols = np.array([0, 1, 2, 3, 4, 5, -1, -1, -1, -1, -1, -1, 12, 13, 14, 15], np.int64)  # the target fixed
     cols[6:12] = np.arange(6, 12)  # … or not
-    params = np.array([1.0 / channels, 1 / 16.0, 9.0, 40.0])
+    params = np.array([1.0 / channels, 1 / 16.0, 9.0, 40.0, grad_c**2])
     outs = []
     for fn in (kern.pair_normal_equations, kern.pair_normal_equations_numpy):
         H, b = np.zeros((n, n)), np.zeros(n)
@@ -108,7 +108,7 @@ def test_gradient_matches_finite_differences_on_a_smooth_image(window) -> None:
     packed = np.ascontiguousarray(np.stack([F, GX, GY], axis=-1)[..., None], dtype=np.float32)
     ref = (np.random.default_rng(2).normal(0, 5, (xs.size, 1)) + 50).astype(np.float32)
     rows = np.arange(xs.size, dtype=np.int64)
-    params = np.array([1.0, 1.0, 1e4, 1e4])  # no Huber, no outliers: a smooth cost (points outside: a constant)
+    params = np.array([1.0, 1.0, 1e4, 1e4, 0.0])  # no Huber, no outliers: a smooth cost (outside: a constant)
     cols = np.array(list(range(12)) + [-1] * 4, np.int64)
     T_h, T_t = np.eye(4), T_th
 

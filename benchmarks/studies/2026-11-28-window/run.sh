@@ -12,6 +12,8 @@ $py benchmarks/window_ab.py --sets 7s-0-349 --variant "w5=window.size=5" --varia
     --jobs 1 > $here/tune_depth_prior.log
 $py benchmarks/window_ab.py --sets tune --variant "m5=window.size=5;window.leave=marginalise" \
     --variant "m7=window.size=7;window.leave=marginalise" > $here/tune_marginalise.log
+$py benchmarks/window_ab.py --sets tune --variant "w5=window.size=5" \
+    --variant "w5g=window.size=5;window.gradient_weight=50" --json $here/tune_gradient_weight.json
 # held back: 7-Scenes 350-699, the start scan's starts 50..500, KITTI 06, Tsukuba
 $py benchmarks/window_ab.py --sets held --variant "w5=window.size=5" \
     --variant "m5=window.size=5;window.leave=marginalise" --json $here/held.json > $here/held.log

@@ -348,6 +348,8 @@ class WindowConfig:
     """Huber threshold of a point's residual norm √(Σ_c r_c² · residual factor), grey levels (DSO: 9)."""
     outlier: float = 40.0
     """A residual norm above this counts as an outlier (no weight, a constant cost); grey levels."""
+    gradient_weight: float = 0.0
+    """DSO's gradient weight c: each residual's weight × √(c² / (c² + κ Σ_c |∇F_c|²)) (DSO: 50); 0: none."""
     depth_prior: float = 1.0
     """Weight of each point's inverse depth from the depth map as a prior (× 1/variance); 0: none."""
     max_outliers: float = 0.5
@@ -379,7 +381,7 @@ class WindowConfig:
         if not self.levels or list(self.levels) != sorted(set(self.levels), reverse=True) or min(self.levels) < 0:
             raise InputError(f"window.levels {self.levels} must be non-negative and strictly decreasing")
         if not (self.huber > 0 and self.outlier > 0 and self.depth_prior >= 0 and self.intrinsics_prior > 0
-                and 0 < self.max_outliers <= 1 and self.max_move > 0):
+                and 0 < self.max_outliers <= 1 and self.max_move > 0 and self.gradient_weight >= 0):
             raise InputError("window.huber, outlier, intrinsics_prior and max_move must be > 0, depth_prior ≥ 0, "
                              "max_outliers in (0, 1]")
         if self.intrinsics_model not in INTRINSICS_MODELS:

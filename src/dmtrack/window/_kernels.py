@@ -10,7 +10,9 @@ values ``F_h``) is warped into a target keyframe t: ``m = ((x − c_x)/f_x, (y �
 ``g = Σ_c ∇F_c r_c`` (target gradients) enter the normal equations, so N channels cost N samples and no more.
 
 Robust weight: e = √(κ Σ_c r_c²) with κ the channel rule's residual factor (the odometry's ``channel_cost``); Huber
-with threshold k: w = 1 for e ≤ k, k/e above; cost ρ(e) = e² or 2ke − k², divided by σ² (the photometric noise).
+with threshold k: w = 1 for e ≤ k, k/e above; cost ρ(e) = e² or 2ke − k², divided by σ² (the photometric noise); with
+a gradient weight c > 0 both are multiplied by √(c² / (c² + κ Σ_c |∇F_c|²)) (DSO's, c = 50), which trusts a residual
+on a strong edge less, where a fraction of a pixel changes it most.
 A residual whose e exceeds ``outlier``, or whose warp leaves the image (a 2-pixel border), gets no weight and the
 constant cost ρ(outlier), so that costs stay comparable while the set of visible points changes.
 
@@ -103,12 +105,13 @@ def pair_normal_equations(
     points, ``ds`` (P,) their inverse depths, ``ref`` (P, N) float32 their values; ``point_rows`` (P,) each point's row
     in ``hpp``/``bp``/``Hcp`` (−1: its depth is fixed); ``T_th`` (4, 4) host → target; ``cam`` (f_x, f_y, c_x, c_y,
     s) of the level, s = 2^−level (the chain to level-0 intrinsics); ``cols`` (16,) the global column of each local
-    pose/intrinsics parameter (−1: fixed); ``params`` (κ, 1/σ², Huber k, outlier e). Adds into ``H`` (n, n), ``b``
-    (n,), ``hpp``, ``bp``, ``Hcp`` (rows, n) and ``stats`` (cost, inliers, outliers); with ``cost_only`` only ``stats``.
+    pose/intrinsics parameter (−1: fixed); ``params`` (κ, 1/σ², Huber k, outlier e, c² of the gradient weight or 0).
+    Adds into ``H`` (n, n), ``b`` (n,), ``hpp``, ``bp``, ``Hcp`` (rows, n) and ``stats`` (cost, inliers, outliers);
+    with ``cost_only`` only ``stats``.
     """
     h, w, _, n = packed.shape
     fx, fy, cx, cy, s = cam[0], cam[1], cam[2], cam[3], cam[4]
-    kappa, inv_s2, hk, out_e = params[0], params[1], params[2], params[3]
+    kappa, inv_s2, hk, out_e, c2 = params[0], params[1], params[2], params[3], params[4]
     cost_out = (2.0 * hk * out_e - hk * hk) * inv_s2 if out_e > hk else out_e * out_e * inv_s2
     R = T_th[:3, :3]
     t = T_th[:3, 3]
@@ -159,12 +162,13 @@ def pair_normal_equations(
             stats[S_OUT] += 1.0
             continue
         stats[S_IN] += 1.0
+        wg = math.sqrt(c2 / (c2 + kappa * (gxx + gyy))) if c2 > 0.0 else 1.0
         if e <= hk:
-            stats[S_COST] += e * e * inv_s2
-            wt = kappa * inv_s2
+            stats[S_COST] += wg * e * e * inv_s2
+            wt = wg * kappa * inv_s2
         else:
-            stats[S_COST] += (2.0 * hk * e - hk * hk) * inv_s2
-            wt = kappa * inv_s2 * hk / e
+            stats[S_COST] += wg * (2.0 * hk * e - hk * hk) * inv_s2
+            wt = wg * kappa * inv_s2 * hk / e
         if cost_only:
             continue
         _dq_columns(R, t, m0, m1, d, q, fx, fy, dq)
@@ -298,7 +302,7 @@ def pair_normal_equations_numpy(
     """Vectorised numpy reference of :func:`pair_normal_equations` (equal up to the order of float64 sums)."""
     h, w, _, _ = packed.shape
     fx, fy, cx, cy, s = (float(v) for v in cam)
-    kappa, inv_s2, hk, out_e = (float(v) for v in params)
+    kappa, inv_s2, hk, out_e, c2 = (float(v) for v in params)
     cost_out = (2.0 * hk * out_e - hk * hk) * inv_s2 if out_e > hk else out_e * out_e * inv_s2
     R, t = T_th[:3, :3], T_th[:3, 3]
     m = np.stack([(xs - cx) / fx, (ys - cy) / fy, np.ones_like(xs)], axis=1)
@@ -324,11 +328,13 @@ def pair_normal_equations_numpy(
     stats[S_OUT] += np.count_nonzero(~use)
     stats[S_IN] += np.count_nonzero(use)
     huber = e <= hk
-    cost = np.where(huber, e * e, 2.0 * hk * e - hk * hk) * inv_s2
+    g2 = kappa * (np.sum(gx * gx, 1) + np.sum(gy * gy, 1))
+    wg = np.sqrt(c2 / (c2 + g2)) if c2 > 0 else np.ones_like(e)
+    cost = wg * np.where(huber, e * e, 2.0 * hk * e - hk * hk) * inv_s2
     stats[S_COST] += float(np.sum(np.where(use, cost, cost_out)))
     if cost_only:
         return
-    wt = np.where(use, kappa * inv_s2 * np.where(huber, 1.0, hk / np.where(e > 0, e, 1.0)), 0.0)
+    wt = np.where(use, wg * kappa * inv_s2 * np.where(huber, 1.0, hk / np.where(e > 0, e, 1.0)), 0.0)
     n_pts = xs.shape[0]
     dq = np.zeros((n_pts, 3, N_LOCAL))
     d = ds[:, None]

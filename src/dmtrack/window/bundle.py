@@ -190,7 +190,8 @@ class PhotometricBundle:
                  "f-c": [[1.0, 0, 0], [self.prior[1] / self.prior[0], 0, 0], [0, 1, 0], [0, 0, 1]],
                  "fxfy-c": np.eye(4)}[config.intrinsics_model]  # fmt: skip
         self.basis = np.asarray(basis, np.float64)  # δK = B δθ
-        self.params = np.array([residual_factor, 1.0 / noise2, config.huber, config.outlier], np.float64)
+        self.params = np.array([residual_factor, 1.0 / noise2, config.huber, config.outlier,
+                                config.gradient_weight**2], np.float64)  # fmt: skip
         self.use_numba = use_numba
         self.marginal: MarginalPrior | None = None  # with leave = "marginalise", once a keyframe has left
 

@@ -86,7 +86,33 @@ def _to_rgb(frame: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
-class StreamSequence:
+class LiveSequence:
+    """The part of the sequence protocol every live source shares: the timestamps of the frames delivered so far
+    (``_times``), their count, and no ground truth or depth."""
+
+    _times: list[float]
+
+    @property
+    def timestamps(self) -> np.ndarray:
+        return np.asarray(self._times, dtype=np.float64)
+
+    @property
+    def groundtruth(self) -> Trajectory | None:
+        return None
+
+    @property
+    def has_groundtruth(self) -> bool:
+        return False
+
+    @property
+    def has_depth(self) -> bool:
+        return False
+
+    def __len__(self) -> int:
+        return len(self._times)
+
+
+class StreamSequence(LiveSequence):
     """Frames of a live source, read in order as they come (see the module documentation).
 
     Parameters
@@ -156,25 +182,6 @@ class StreamSequence:
     @property
     def height(self) -> int:
         return self._size[1]
-
-    @property
-    def timestamps(self) -> np.ndarray:
-        return np.asarray(self._times, dtype=np.float64)
-
-    @property
-    def groundtruth(self) -> Trajectory | None:
-        return None
-
-    @property
-    def has_groundtruth(self) -> bool:
-        return False
-
-    @property
-    def has_depth(self) -> bool:
-        return False
-
-    def __len__(self) -> int:
-        return len(self._times)
 
     def __getitem__(self, index: int) -> Frame:
         with self._lock:

@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 
 from dmtrack.datasets.base import Frame
-from dmtrack.datasets.stream import EndOfStream
+from dmtrack.datasets.stream import EndOfStream, LiveSequence
 from dmtrack.geometry.camera import PinholeCamera
-from dmtrack.io.trajectory import Trajectory
 
 FORMAT = "ros2"
 #: Frames that may wait for the odometry by default (3 s of a 10 Hz camera).
@@ -32,7 +31,7 @@ QUEUE_SIZE = 30
 STAMPS_KEPT = 100_000
 
 
-class TopicFrames:
+class TopicFrames(LiveSequence):
     """A live sequence fed by a subscription (see the module docstring).
 
     Parameters
@@ -137,25 +136,6 @@ class TopicFrames:
     @property
     def height(self) -> int:
         return 0 if self._size is None else self._size[1]
-
-    @property
-    def timestamps(self) -> np.ndarray:
-        return np.asarray(self._times, dtype=np.float64)
-
-    @property
-    def groundtruth(self) -> Trajectory | None:
-        return None
-
-    @property
-    def has_groundtruth(self) -> bool:
-        return False
-
-    @property
-    def has_depth(self) -> bool:
-        return False
-
-    def __len__(self) -> int:
-        return len(self._times)
 
     def __getitem__(self, index: int) -> Frame:
         """Frame ``index`` of the frames read so far, or the next one to come (waits); earlier ones are gone."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from dmtrack.geometry.exact import dot, matmul
 from dmtrack.odometry.config import WindowConfig
+from dmtrack.odometry.records import _inv_se3
 from dmtrack.window import _kernels as kern
 
 __all__ = ["BundleReport", "HostPoints", "PhotometricBundle", "WindowKeyframe", "sample_points"]
@@ -123,7 +124,7 @@ class MarginalPrior:
         idx = [(k, where[kid]) for k, kid in enumerate(self.ids) if kid in where]
         delta = np.zeros(self.b.size)
         for k, i in idx:
-            delta[6 * k : 6 * k + 6] = kern.se3_log(matmul(poses[i], _inv(self.T0[k])))
+            delta[6 * k : 6 * k + 6] = kern.se3_log(matmul(poses[i], _inv_se3(self.T0[k])))
         Hd = matmul(self.H, delta)
         cost = 2.0 * dot(self.b, delta) + dot(delta, Hd)
         if system is not None:
@@ -150,13 +151,6 @@ def _eliminate_first(A: np.ndarray, r: np.ndarray, m: int) -> tuple[np.ndarray, 
         X[:, j], _ = kern.cholesky_solve(Amm, np.ascontiguousarray(Arm[j]))
     y, _ = kern.cholesky_solve(Amm, np.ascontiguousarray(r[:m]))
     return A[m:, m:] - matmul(Arm, X), r[m:] - matmul(Arm, y)
-
-
-def _inv(T: np.ndarray) -> np.ndarray:
-    Ti = np.eye(4)
-    Ti[:3, :3] = T[:3, :3].T
-    Ti[:3, 3] = -matmul(T[:3, :3].T, T[:3, 3])
-    return Ti
 
 
 class PhotometricBundle:
@@ -244,7 +238,7 @@ class PhotometricBundle:
                 pts.ref[level] = ref
             free = self._free_points(i)
             prow = (np.arange(pts.count, dtype=np.int64) + offsets[i]) if free else np.full(pts.count, -1, np.int64)
-            T_hw_inv = _inv(poses[i])
+            T_hw_inv = _inv_se3(poses[i])
             d = depths[i]
             assert d is not None
             for j, target in enumerate(kfs):
@@ -403,10 +397,7 @@ class PhotometricBundle:
         H, b, hpp, bp, Hcp = self._in_basis(sysm, n_pose)
         n = H.shape[0]
         nk = n - n_pose
-        A = H.copy()
-        inv = np.where(hpp > 0, 1.0 / np.where(hpp > 0, hpp, 1.0), 0.0)
-        for p in np.nonzero(hpp > 0)[0]:
-            A -= np.outer(Hcp[p], Hcp[p]) * inv[p]
+        A, _ = kern.schur_reduce(np.ascontiguousarray(H), b, hpp, bp, np.ascontiguousarray(Hcp))
         cov = np.full((nk, nk), np.nan)
         for k in range(nk):
             e = np.zeros(n)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from dmtrack.geometry.exact import norm
 from dmtrack.odometry.config import ChannelRule, VOConfig, WindowConfig
 from dmtrack.odometry.records import _inv_se3
 from dmtrack.odometry.windowing import WindowUpdate
@@ -179,7 +180,7 @@ class SlidingWindow:
         new, finished = self.keyframes[-1], self.keyframes[-2]
         moved = _inv_se3(new.T_cw)[:3, 3] - np.asarray(T_wc_tracked, np.float64)[:3, 3]
         baseline = np.asarray(T_wc_tracked, np.float64)[:3, 3] - _inv_se3(finished.T_cw)[:3, 3]
-        return bool(np.sqrt(np.sum(moved * moved)) > self.config.max_move * np.sqrt(np.sum(baseline * baseline)))
+        return bool(norm(moved) > self.config.max_move * norm(baseline))
 
     def _restart_at_newest(self) -> WindowUpdate:
         """Every keyframe but the newest leaves with the estimate it had; the window begins anew from the newest."""

@@ -665,7 +665,7 @@ class VisualOdometry(LossHandling, WindowedKeyframes):
             before_start=self._before_start,
             relocalisations=list(self._relocalisations),
             segments=list(self._segments),
-            window=None if self._window is None else getattr(getattr(self._window, "stats", None), "as_dict", dict)(),
+            window=None if self._window is None else self._window.summary(),
         )
 
     def __repr__(self) -> str:

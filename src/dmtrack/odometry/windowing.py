@@ -54,6 +54,9 @@ class KeyframeWindow(Protocol):
     def clear(self) -> WindowUpdate:
         """Let every keyframe leave."""
 
+    def summary(self) -> dict[str, Any]:
+        """What the window did over the run (``VOResult.window``, ``metrics.json``'s ``window``)."""
+
 
 class WindowedKeyframes:
     """The odometry's side of the window (a mixin of :class:`~dmtrack.odometry.vo.VisualOdometry`)."""

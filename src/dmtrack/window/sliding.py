@@ -106,6 +106,10 @@ class SlidingWindow:
         """Ids of the keyframes in the window, oldest first."""
         return [kf.keyframe_id for kf in self.keyframes]
 
+    def summary(self) -> dict[str, Any]:
+        """:attr:`stats` for ``metrics.json``."""
+        return self.stats.as_dict()
+
     def clear(self) -> WindowUpdate:
         """Every keyframe leaves."""
         left = [kf.keyframe_id for kf in self.keyframes]

@@ -24,11 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix
-from scipy.spatial.transform import Rotation
 
 from dmtrack.geometry import exact
+from dmtrack.geometry.scipy_rotation import matrix_from_rotvec
 from dmtrack.initialization.twoview import bearings
 
 __all__ = ["BundleResult", "bundle_adjust"]
@@ -157,6 +155,10 @@ def _adjust(
     rounds: int,
     max_nfev: int,
 ) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.optimize import least_squares  # the reference solver: scipy only when asked for
+    from scipy.sparse import csr_matrix
+    from scipy.spatial.transform import Rotation
+
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     k = len(T)
     I, J, U = _observation_index(obs, kept)
@@ -312,7 +314,7 @@ def _adjust_schur(
                 continue
             dp = (bp - np.einsum("na,a->n", Hcp, dc)) / Hpp_d
             d = dc.reshape(k, 6)
-            dR = Rotation.from_rotvec(d[:, 3:]).as_matrix()
+            dR = matrix_from_rotvec(d[:, 3:])  # scipy's Rotation.from_rotvec, bit for bit
             Tn = T.copy()
             Tn[:, :3, :3] = np.einsum("kab,kbc->kac", dR, T[:, :3, :3])
             Tn[:, :3, 3] = np.einsum("kab,kb->ka", dR, T[:, :3, 3]) + d[:, :3]

@@ -39,11 +39,12 @@ import time
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from dmtrack.errors import InputError
+from dmtrack.features.images import prepare_image
 from dmtrack.geometry import exact
 from dmtrack.geometry.camera import PinholeCamera
+from dmtrack.geometry.scipy_rotation import magnitude_of_matrix, slerp_from_identity
 from dmtrack.initialization.bundle import bundle_adjust
 from dmtrack.initialization.first_map import grey_frame, make_first_map
 from dmtrack.initialization.tracks import CornerTracks, grid_coverage
@@ -125,7 +126,8 @@ class GeometricInitializer:
         if image.shape[:2] != (self.camera.height, self.camera.width):
             raise InputError(f"frame {index} is {image.shape[1]}x{image.shape[0]}, the camera {self.camera.width}x"
                              f"{self.camera.height}")
-        self._images.append(image)
+        # the grey image is all the start uses (corners, the first map): a third of an RGB frame's memory
+        self._images.append(prepare_image(image, colour=False))
         self._indices.append(index)
         self._timestamps.append(timestamp)
         k = len(self._indices) - 1
@@ -226,10 +228,10 @@ class GeometricInitializer:
         rho = np.clip(np.where(good, rho, med), 1e-2 * med, 1e2 * med)
         s = float(np.mean(rho))
         rho /= s
-        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([np.eye(3), tv.R])))
         poses = np.tile(np.eye(4), (len(window), 1, 1))
+        turns = slerp_from_identity(tv.R, np.array([(i - r) / (k - r) for i in window]))
         for n, i in enumerate(window):
-            poses[n, :3, :3] = slerp((i - r) / (k - r)).as_matrix()
+            poses[n, :3, :3] = turns[n]
             poses[n, :3, 3] = tv.t * s * ((i - r) / (k - r))
         first = self._tracks.first[idx]
         obs = [self._tracks.observations(i - r)[idx] for i in window]
@@ -320,7 +322,7 @@ def _window(k: int, n: int, also: int | None = None) -> list[int]:
 def _disagreement(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """Rotation angle between two poses of one frame and the angle between their directions of motion, degrees
     (the scale of two windows differs)."""
-    rot = float(np.degrees(Rotation.from_matrix(exact.matmul(a[:3, :3], b[:3, :3].T)).magnitude()))
+    rot = float(np.degrees(magnitude_of_matrix(exact.matmul(a[:3, :3], b[:3, :3].T))))
     ta, tb = a[:3, 3], b[:3, 3]
     c = exact.dot(ta, tb) / max(exact.norm(ta) * exact.norm(tb), 1e-300)
     return rot, float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))

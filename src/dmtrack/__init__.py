@@ -90,3 +90,19 @@ def _passive_omp_waits() -> None:
 
 
 _passive_omp_waits()
+
+
+def _prefer_openmp() -> None:
+    """Sets ``NUMBA_THREADING_LAYER_PRIORITY="omp tbb workqueue"`` unless the user set it (or chose a layer).
+
+    numba takes TBB before OpenMP when a TBB library is on the system — an ``apt install libopencv-dev`` brings one.
+    TBB's workers spin after each of the odometry's few dozen short parallel regions a frame; on the shared
+    7-Scenes (grey, 700 frames, 2 cores) OpenMP with passive waits took 10.2 against 10.8 s and 16.6 against 18.3 s
+    of CPU, with the same trajectory (benchmarks/studies/2026-11-29-lean). Without libgomp numba falls back to TBB,
+    then to its own workqueue.
+    """
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb workqueue")
+
+
+_prefer_openmp()

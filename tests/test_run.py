@@ -197,3 +197,57 @@ def test_run_folder_has_the_groundtruth_of_its_frames(tmp_path, sample_dir):
     run_to_directory(folder, tmp_path / "run", intrinsics="585,585,320,240", depth_images=False, pointcloud=False)
     assert (tmp_path / "run" / "metrics.json").is_file()
     assert not (tmp_path / "run" / "groundtruth.txt").exists()
+
+
+class _CountingFrames:
+    """A sequence whose decoded frames are counted while they are alive (weak references)."""
+
+    def __init__(self, seq: object) -> None:
+        self._seq = seq
+        self.alive = self.peak = self.reads = 0
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._seq, name)
+
+    def __len__(self) -> int:
+        return len(self._seq)
+
+    def _count(self, frame: object) -> object:
+        import weakref
+
+        self.reads += 1
+        self.alive += 1
+        self.peak = max(self.peak, self.alive)
+        weakref.finalize(frame.image, self._gone)
+        return frame
+
+    def _gone(self) -> None:
+        self.alive -= 1
+
+    def __getitem__(self, i: int) -> object:
+        return self._count(self._seq[i])
+
+    def read_frame(self, i: int, depth: bool = False) -> object:
+        return self._count(self._seq.read_frame(i, depth=depth))
+
+
+def test_the_start_holds_few_frames_and_startup_is_measured(tmp_path: Path, sample_dir: Path) -> None:
+    """The geometric start reads tens of frames before it accepts; a recorded sequence's are read again when the
+    odometry comes to them instead of being held (they were the run's peak of memory), with the same trajectory.
+    metrics.json says where the time before the first frame went."""
+    from dmtrack.datasets import open_sequence
+
+    seq = _CountingFrames(open_sequence(sample_dir))
+    r = run_to_directory(seq, tmp_path / "a", max_frames=60, depth_images=False, pointcloud=False)
+    m = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    assert m["init"] == "geometric" and m["init_accepted_frame"] is not None
+    assert m["init_accepted_frame"] > 10  # the start read that many frames first
+    assert seq.peak <= 8, f"{seq.peak} decoded frames alive at once"
+    assert seq.reads > 60  # the start's frames were read twice
+    plain = run_to_directory(sample_dir, tmp_path / "b", max_frames=60, depth_images=False, pointcloud=False)
+    np.testing.assert_array_equal(r.trajectory.poses, plain.trajectory.poses)
+    s = m["startup"]
+    assert set(s) == {"import_s", "run_s", "warmup_s", "start_s", "first_frame_s"}
+    if s["run_s"] is not None:  # Linux: ages of the process
+        assert 0 < s["import_s"] <= s["run_s"] < s["first_frame_s"]
+        assert s["warmup_s"] >= 0 and s["start_s"] >= 0

@@ -71,6 +71,17 @@ class RunStart:
         s = self._starts.get(_key(config)) if config.init == "geometric" else None
         return None if s is None else s.initial_map
 
+    def release_maps(self) -> None:
+        """The odometries have copied their first maps: drop the starts' arrays (six 640×480 maps, 6 MB); the
+        accepted frame and the start's measurements stay for :meth:`metrics`."""
+        empty = np.zeros((0, 0), np.float32)
+        for s in self._starts.values():
+            m = s.initial_map
+            if m is not None and m.idepth.size:
+                s.initial_map = dataclasses.replace(m, valid=empty.astype(bool), idepth=empty, idepth_var=empty,
+                                                    idepth_smoothed=empty, idepth_var_smoothed=empty,
+                                                    validity=empty)  # fmt: skip
+
     def config_for(self, config: VOConfig) -> VOConfig:
         """The configuration the odometry runs with: ``init="random"`` where the geometric start refused."""
         if config.init == "geometric" and self.initial_map(config) is None:

@@ -16,3 +16,41 @@ def cpu_model() -> str:
     except OSError:
         pass
     return cpu
+
+
+def process_age_s() -> float | None:
+    """Seconds since this process was started (Linux: ``/proc/self/stat``'s start time against ``CLOCK_BOOTTIME``;
+    10 ms resolution); ``None`` where that cannot be read. For ``dmtrack run`` it is the time since the command was
+    launched, interpreter start-up included."""
+    import os
+    import time
+
+    try:
+        with open("/proc/self/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+        started = int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of proc(5): start time after boot, ticks
+        return max(0.0, time.clock_gettime(time.CLOCK_BOOTTIME) - started)
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+
+
+def release_free_memory() -> bool:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim(0)``; elsewhere nothing).
+
+    Memory freed by numpy stays with the allocator, and its pages stay resident, when it sits below memory still in
+    use; after a phase that freed much (the geometric start's frames and first map) this returns those pages, so
+    the run's resident memory is what it holds. Returns whether any memory was released."""
+    import ctypes
+    import ctypes.util
+
+    global _LIBC
+    if _LIBC is None:
+        try:
+            _LIBC = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            _LIBC.malloc_trim.argtypes = [ctypes.c_size_t]
+        except (OSError, AttributeError):
+            _LIBC = False
+    return bool(_LIBC and _LIBC.malloc_trim(0))
+
+
+_LIBC = None

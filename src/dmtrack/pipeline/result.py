@@ -61,6 +61,14 @@ class RunResult:
     compile_s
         Seconds :func:`warm_up` took before the first frame (numba compiling or loading the kernels;
         0 when this process had warmed up the feature and configuration already, or without warm-up).
+    startup
+        Where the time before the first frame went, ``metrics.json``'s ``startup``: ``import_s`` (the process's age
+        when dmtrack's run modules had been imported: interpreter and imports), ``run_s`` (its age when the run
+        began: also the command line and opening the sequence), ``warmup_s`` (the kernels compiled or loaded from
+        numba's cache), ``start_s`` (the geometric start beyond the warm-up it runs beside) and ``first_frame_s``
+        (the process's age when the odometry had finished its first frame). Ages are seconds since the process
+        started (:func:`dmtrack.io.machine.process_age_s`; ``None`` off Linux): for ``dmtrack run``, since it was
+        launched.
     init
         How the first map was made: ``metrics.json``'s ``init*`` keys
         (:meth:`~dmtrack.initialization.run_start.RunStart.metrics`).
@@ -85,6 +93,7 @@ class RunResult:
     dropped_frames: int = 0
     realtime: bool = False
     compile_s: float = 0.0
+    startup: dict[str, float | None] = field(default_factory=dict)
     init: dict[str, Any] = field(default_factory=dict)
     slam: Any = None
     vo_trajectory: Trajectory | None = None
@@ -144,6 +153,7 @@ def metrics_dict(
         "pyramid_ms": t["pyramid"],
         "wall_s": t["wall_s"],
         "compile_s": float(result.compile_s),
+        "startup": {k: None if v is None else round(float(v), 4) for k, v in result.startup.items()},
         "keyframes": len(result.keyframes),
         **_loss_metrics(result.vo),
         "start": int(start),

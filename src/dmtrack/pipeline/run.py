@@ -14,7 +14,8 @@ import dataclasses
 import os
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from dmtrack.datasets.stream import EndOfStream, RealtimeFrames, live_source
 from dmtrack.errors import InputError, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
 from dmtrack.initialization.run_start import RunStart
+from dmtrack.io.machine import process_age_s, release_free_memory
 from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry.config import CHANNEL_STAT_KEYS, VOConfig
 from dmtrack.odometry.sink import OutputSink
@@ -126,6 +128,8 @@ class SequenceRun:
         self.kept: dict[int, Any] = {}  # frames read for the geometric start, given to the odometry next
         self.t_io = self.t_feat = self.compile_s = 0.0
         self.t_start = 0.0  # perf_counter() when the run's clock (wall_s, fps) starts: after the warm-up
+        self._run_start: RunStart | None = None
+        self.startup: dict[str, float | None] = {}  # metrics.json's "startup" (run(), _begin(), _loop())
 
     def _attach(self) -> None:
         for vo, r in zip(self.vos, self.recoveries, strict=True):
@@ -165,7 +169,8 @@ class SequenceRun:
     def _read(self, i: int) -> Any:
         # the ground-truth depth is decoded only for init='groundtruth' (of the first frame, or any frame grabbed)
         if i in self.kept:
-            return self.kept.pop(i)
+            item = self.kept.pop(i)
+            return item.result() if isinstance(item, Future) else item
         if self._read_frame is None:
             return self.seq[i]
         return self._read_frame(i, depth=self.init_depth and (self.realtime or i == self.start))
@@ -201,8 +206,10 @@ class SequenceRun:
         watch = getattr(live_source(self.seq), "watch_stop", None)
         if callable(watch):  # a live source that waits for frames (the ROS node's) stops waiting on Ctrl-C
             watch(lambda: stops.pending is not None)
+        self.startup = {"import_s": IMPORTED_AT, "run_s": process_age_s(), "warmup_s": None, "start_s": None,
+                        "first_frame_s": None}
         frames = self._frames(stops)
-        run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
+        run_start = self._run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
         self.t_start = time.perf_counter()
         try:
             self._begin(run_start, stops, warmup)
@@ -242,6 +249,8 @@ class SequenceRun:
             finally:
                 self.t_start = time.perf_counter()
                 starting.result()
+        self.startup.update(warmup_s=self.compile_s if warmup else None, start_s=time.perf_counter() - self.t_start)
+        release_free_memory()  # what the warm-up and the start freed (their frames, maps, threads' heaps)
         for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in self.configs) if r):  # in metrics
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
         self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink,
@@ -250,16 +259,32 @@ class SequenceRun:
         self._attach()
 
     def _start(self, run_start: RunStart, stops: _StopBetweenFrames) -> None:
-        """Feed the run's first frames to its geometric starts (if any) until each has accepted or refused; the
-        frames read are kept for the odometry."""
+        """Feed the run's first frames to its geometric starts (if any) until each has accepted or refused.
+
+        A live source's frames are kept for the odometry; a recorded sequence's are read again (its first one and
+        those read ahead are kept)."""
         i = self.start
-        while run_start.collecting and (self.stop is None or i < self.stop) and stops.pending is None:
-            try:
-                frame = self.kept[i] = self._read(i)
-            except EndOfStream:  # a live source ended
-                break
-            run_start.add(i, frame.timestamp, crop_image(frame.image, self.box))
-            i += 1
+        if not run_start.collecting:
+            return
+        # one reader thread decodes the next frames (in order) while this one tracks corners
+        with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start-read") as reader:
+            ahead: deque[tuple[int, Any]] = deque()
+            nxt = i
+            while run_start.collecting and (self.stop is None or i < self.stop) and stops.pending is None:
+                while len(ahead) < 3 and (self.stop is None or nxt < self.stop):
+                    ahead.append((nxt, reader.submit(self._read, nxt)))
+                    nxt += 1
+                try:
+                    frame = ahead.popleft()[1].result()
+                except EndOfStream:  # a live source ended
+                    ahead.clear()  # the reads after it end the same way
+                    break
+                if self.live or i == self.start:  # a recorded frame is read again when the odometry comes to it
+                    self.kept[i] = frame          # (tens of frames held would be the run's peak of memory)
+                run_start.add(i, frame.timestamp, crop_image(frame.image, self.box))
+                i += 1
+            for j, fut in ahead:  # read ahead, not needed by the start: the odometry's next frames (an error
+                self.kept[j] = fut  # reading one is raised when the odometry comes to it, as without read-ahead)
         run_start.end(i - self.start)
 
     def _loop(self, frames: Any, maps: list[Any], stops: _StopBetweenFrames, bar: Any) -> None:
@@ -277,6 +302,12 @@ class SequenceRun:
                 else:
                     vo.process(i, timestamp, image, fmap, depth, m if m is not None and i == m.frame_index else None)
             image = fmap = depth = None  # not kept while the next frame is awaited (157 MB for dense SIFT)
+            if any(m is not None and i >= m.frame_index for m in maps):  # the odometries have copied their maps
+                maps = [None if m is not None and i >= m.frame_index else m for m in maps]
+                if all(m is None for m in maps) and self._run_start is not None:
+                    self._run_start.release_maps()
+            if self.startup.get("first_frame_s") is None:
+                self.startup["first_frame_s"] = process_age_s()
             if bar is not None:
                 bar.update(i + 1 - self.start - bar.n)
                 bar.set_postfix_str(f"kf {self.vos[0].n_keyframes}", refresh=False)
@@ -335,6 +366,7 @@ class SequenceRun:
                 dropped_frames=int(frames.dropped) + int(getattr(live_source(seq), "dropped", 0)),
                 realtime=self.realtime,
                 compile_s=self.compile_s,
+                startup=dict(self.startup),
                 init=run_start.metrics(config),
                 slam=slam,
                 vo_trajectory=vo_trajectory if slam is not None else None,
@@ -473,3 +505,8 @@ def warm_up(feature: Any, config: VOConfig | None = None, *, strict: bool = Fals
     if key is not None:
         _WARMED.add(key)  # also after a failure: not tried again
     return time.perf_counter() - t0
+
+
+#: Seconds from the process's start to the end of this module's import (with the odometry's and the readers'
+#: modules): ``metrics.json``'s ``startup.import_s``.
+IMPORTED_AT = process_age_s()

@@ -52,10 +52,10 @@ def _dmtrack() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "dmtrack.cli"]
 
 
-def run_process(args: list[str]) -> dict[str, float]:
+def run_process(args: list[str], env: dict[str, str] | None = None) -> dict[str, float]:
     """Run one command to its end; wall, CPU (user + system) seconds and peak RSS (MB) of that process alone."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     code = os.waitstatus_to_exitcode(status)
@@ -152,6 +152,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-lsd", action="store_true", help="dmtrack only (no ratios)")
     ap.add_argument("--out", type=Path, default=None, help="default: out/benchmarks/speed-vs-lsd-DATE")
     ap.add_argument("--readme", type=Path, default=None, help="replace this file's speed-vs-lsd block")
+    ap.add_argument("--baseline", type=Path, default=None, metavar="SRC",
+                    help="another dmtrack source tree (its src/ folder, e.g. a git worktree of an older commit): its "
+                         "grey run joins the rounds as 'dmtrack gray (baseline)', with its own numba cache")
     a = ap.parse_args(argv)
     date = datetime.date.today().isoformat()
     out = a.out or REPO / "out" / "benchmarks" / f"speed-vs-lsd-{date}"
@@ -163,10 +166,10 @@ def main(argv: list[str] | None = None) -> int:
                          "or --no-lsd")
     images, calib, n = lsd_inputs(a.sequence, a.frames, out)
     tmp = Path(tempfile.mkdtemp(prefix="speed-vs-lsd-"))
-    variants: list[tuple[str, list[str], Path | None]] = []
+    variants: list[tuple[str, list[str], Path | None, dict[str, str] | None]] = []
     if not a.no_lsd:
         variants.append(("LSD-SLAM", [str(a.lsd), f"files={images}", f"calib={calib}", f"out={tmp / 'lsd'}",
-                                      "seed=1", "trace=0"], None))  # fmt: skip
+                                      "seed=1", "trace=0"], None, None))  # fmt: skip
     for feature in [f.strip() for f in a.features.split(",") if f.strip()]:
         for k in [int(w) for w in a.windows.split(",")]:
             name = f"dmtrack {feature}" + (f" window {k}" if k else "")
@@ -175,8 +178,17 @@ def main(argv: list[str] | None = None) -> int:
                    "--out", str(run_dir)]  # fmt: skip
             if k:
                 cmd += ["--window", str(k)]
-            variants.append((name, cmd, run_dir))
-            run_process([*cmd[:cmd.index("--max-frames") + 1], "5", *cmd[cmd.index("--max-frames") + 2:]])  # warm
+            variants.append((name, cmd, run_dir, None))
+    if a.baseline is not None:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+        env.update(PYTHONPATH=str(a.baseline.resolve()), NUMBA_CACHE_DIR=str(tmp / "numba-baseline"))
+        run_dir = tmp / "baseline"
+        variants.append(("dmtrack gray (baseline)", [sys.executable, "-m", "dmtrack.cli", "run", str(a.sequence),
+                         "--feature", "gray", "--max-frames", str(n), "--out", str(run_dir)], run_dir, env))
+    for _, cmd, run_dir, env in variants:
+        if run_dir is not None:  # numba's cache warm before anything is timed
+            i = cmd.index("--max-frames")
+            run_process([*cmd[: i + 1], "5", *cmd[i + 2 :]], env)
     cpu = platform.processor() or platform.machine()
     try:
         cpu = next(ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
@@ -187,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[dict] = []
     with (out / "runs.jsonl").open("w") as log:
         for r in range(a.rounds):
-            for name, cmd, run_dir in variants:
-                row = {"round": r, "variant": name, "load": os.getloadavg()[0], **run_process(cmd)}
+            for name, cmd, run_dir, env in variants:
+                row = {"round": r, "variant": name, "load": os.getloadavg()[0], **run_process(cmd, env)}
                 if run_dir is not None:
                     m = json.loads((run_dir / "metrics.json").read_text())
                     row.update(loop_fps=m["fps"], frames=m["processed_frames"], startup=m.get("startup", {}),

@@ -97,7 +97,7 @@ def _prefer_openmp() -> None:
 
     numba takes TBB before OpenMP when a TBB library is on the system — an ``apt install libopencv-dev`` brings one.
     TBB's workers spin after each of the odometry's few dozen short parallel regions a frame; on the shared
-    7-Scenes (grey, 700 frames, 2 cores) OpenMP with passive waits took 10.2 against 10.8 s and 16.6 against 18.3 s
+    7-Scenes (grey, 700 frames, 2 cores) OpenMP with passive waits took 10.2 against 10.8 s and 16.6 against 18.2 s
     of CPU, with the same trajectory (benchmarks/studies/2026-11-29-lean). Without libgomp numba falls back to TBB,
     then to its own workqueue.
     """

@@ -197,7 +197,9 @@ def test_window_converges_to_the_truth(window) -> None:
     cam = window[0].camera
     report = PhotometricBundle(cfg, (cam.fx, cam.fy, cam.cx, cam.cy), (cam.width, cam.height)).optimise(kfs)
     e1, d1 = _pose_errors(kfs, truth), _depth_errors(kfs, depths)
-    assert e0[1:].min() > 0.006 and e1[0] == 0.0  # the anchor does not move
+    assert e0[1:].min() > 0.006
+    np.testing.assert_array_equal(kfs[0].T_cw, truth[0])  # the anchor does not move (compared as it is: T·T⁻¹ need
+    # not give an exact 0 translation, it depends on the BLAS numpy brings)
     assert e1[1:].max() < 0.003
     assert np.all(d1 < 0.6 * d0)
     assert report.cost_after < report.cost_before and report.iterations > 3

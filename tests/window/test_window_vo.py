@@ -163,3 +163,26 @@ def test_a_rejected_optimisation_leaves_the_odometry_alone(frames) -> None:
     assert [k.keyframe_id for k in sink.keyframes] == list(range(len(res.keyframes)))
     moved = dataclasses.replace(CONFIG, window=WindowConfig(size=4, points=300, max_move=1e-9))
     assert _run(frames, moved, n=30)[1].window["rejected"] >= 1  # the new keyframe moved at all
+
+
+def test_held_keyframes_keep_only_what_their_emission_reads(frames) -> None:
+    """A finished keyframe waits in the window without its depth map's working state or its full-resolution
+    gradients (45 MB of a grey 640×480 run); what it emits when it leaves is what it held."""
+    from dmtrack.odometry.windowing import FinishedMap
+
+    sink = MemorySink()
+    vo = VisualOdometry(CAMERA, CONFIG, sink, window=SlidingWindow(CONFIG, CAMERA))
+    for i, fr in enumerate(frames[:30]):
+        vo.process(fr.index, fr.timestamp, fr.image, fr.image.astype(np.float32), fr.depth if i == 0 else None)
+    held = dict(vo._held)
+    assert held, "the window holds finished keyframes"
+    for kf, finished in held.values():
+        assert isinstance(finished, FinishedMap)
+        assert kf.levels[0]._gx is None and kf.levels[0]._max_grad is None and kf.levels[0]._packed is None
+        assert kf.levels[1].packed is not None  # the window's levels are there
+    vo.finish()
+    emitted = {s.keyframe_id: s for s in sink.keyframes}
+    for kf_id, (_, finished) in held.items():
+        idepth, var = finished.tracking_depth()
+        np.testing.assert_array_equal(emitted[kf_id].idepth, idepth)
+        np.testing.assert_array_equal(emitted[kf_id].idepth_var, var)

@@ -125,6 +125,12 @@ class Level:
                 self._packed = pack_numpy(self.feat)
         return self._packed
 
+    def release_gradients(self) -> None:
+        """Let go of the gradients, ``max_grad`` and ``packed`` (computed again, the same bits, if read again): a
+        finished keyframe held by the sliding window is read only at its coarser levels (grey: 3.6 MB at 640×480,
+        Bit-Planes 21 MB)."""
+        self._gx = self._gy = self._max_grad = self._packed = None
+
     def __repr__(self) -> str:
         return f"Level({self.width}x{self.height}x{self.feat.shape[2]})"
 

@@ -58,6 +58,20 @@ class KeyframeWindow(Protocol):
         """What the window did over the run (``VOResult.window``, ``metrics.json``'s ``window``)."""
 
 
+class FinishedMap:
+    """What the emission of a finished keyframe reads of its depth map (:meth:`tracking_depth`, ``n_updates``), kept
+    while the window holds the keyframe instead of the map itself (the map is final: nothing changes it)."""
+
+    __slots__ = ("_idepth", "_var", "n_updates")
+
+    def __init__(self, dm: Any) -> None:
+        self._idepth, self._var = dm.tracking_depth()
+        self.n_updates = int(dm.n_updates)
+
+    def tracking_depth(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._idepth, self._var
+
+
 class WindowedKeyframes:
     """The odometry's side of the window (a mixin of :class:`~dmtrack.odometry.vo.VisualOdometry`)."""
 
@@ -123,7 +137,10 @@ class WindowedKeyframes:
         self._window.set_scale(new_id, s_wk * rho)
         if new_pose is not None:  # placed by the window, not where its frame was tracked
             self._moved.add(new_id)
-        self._held[old_id] = (old_kf, old_dm)
+        # held until it leaves: what its emission reads, not the map's working state (ten (H, W) arrays) nor its
+        # full-resolution gradients (the window reads its coarser levels)
+        self._held[old_id] = (old_kf, FinishedMap(old_dm))
+        old_kf.levels[0].release_gradients()
         self._emit_left(update.left)  # the finished keyframe too when the window began anew (a rejected optimisation)
         on_window = getattr(self.sink, "on_window", None)  # type: ignore[attr-defined]
         if on_window is not None:  # the window's keyframes as it left them (a viewer)

@@ -261,8 +261,9 @@ class SequenceRun:
     def _start(self, run_start: RunStart, stops: _StopBetweenFrames) -> None:
         """Feed the run's first frames to its geometric starts (if any) until each has accepted or refused.
 
-        A live source's frames are kept for the odometry; a recorded sequence's are read again (its first one and
-        those read ahead are kept)."""
+        Frames read from their own image files are read again when the odometry comes to them (the first one and
+        those read ahead are kept); other frames — a live source's, a video's or a bag's, rendered ones — are kept
+        for the odometry."""
         i = self.start
         if not run_start.collecting:
             return
@@ -279,8 +280,11 @@ class SequenceRun:
                 except EndOfStream:  # a live source ended
                     ahead.clear()  # the reads after it end the same way
                     break
-                if self.live or i == self.start:  # a recorded frame is read again when the odometry comes to it
-                    self.kept[i] = frame          # (tens of frames held would be the run's peak of memory)
+                # a frame of its own image file is read again when the odometry comes to it (tens of frames held
+                # were the run's peak of memory); a live source's, a video's (seeking back may land elsewhere) or a
+                # rendered one is kept, as is the first
+                if self.live or i == self.start or getattr(frame, "path", None) is None:
+                    self.kept[i] = frame
                 run_start.add(i, frame.timestamp, crop_image(frame.image, self.box))
                 i += 1
             for j, fut in ahead:  # read ahead, not needed by the start: the odometry's next frames (an error

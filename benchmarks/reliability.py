@@ -32,7 +32,8 @@ PROMISES = (REPO / "benchmarks" / "reliability_promises.md").read_text(encoding=
 
 def run_suite(log: Path, examples: int) -> tuple[int, str, float]:
     log.unlink(missing_ok=True)
-    env = {**os.environ, "DMTRACK_FAULT_LOG": str(log), "DMTRACK_FUZZ_EXAMPLES": str(examples)}
+    env = {**os.environ, "DMTRACK_FAULT_LOG": str(log), "DMTRACK_FUZZ_EXAMPLES": str(examples),
+           "DMTRACK_FUZZ_RANDOM": "1"}  # new examples each time (the test suite's are fixed)
     t0 = time.perf_counter()
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/faults"],

@@ -38,8 +38,11 @@ from dmtrack.io.trajectory import Trajectory, read_kitti, read_trajectory, read_
 from dmtrack.odometry.config import VOConfig
 
 FUZZ_EXAMPLES = int(os.environ.get("DMTRACK_FUZZ_EXAMPLES", "200"))
+# The test suite's fuzzing is derandomised (the same examples every run: CI must not pass or fail by chance);
+# benchmarks/reliability.py explores new ones (DMTRACK_FUZZ_RANDOM=1) at its full profile.
 FUZZ = settings(
     max_examples=FUZZ_EXAMPLES,
+    derandomize=os.environ.get("DMTRACK_FUZZ_RANDOM") != "1",
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
 )
@@ -326,6 +329,7 @@ def _sane_calibration(cal: CalibrationFile) -> None:
 @FUZZ
 @given(data=fuzzed(DSO_CAMERA + [c.replace("640 480", "64 48").replace("1280 1024", "128 96") for c in DSO_CAMERA]))
 @example(data=b"KannalaBrandt 1e-320 0.3 0.5 0.5 0.01 0.002 0 0\n100 80\nfull\n96 80\n")  # found at 1,000: overflow
+@example(data=b"KannalaBrandt 0.5 0.3 0.5 0.5 0.01 0.002 0 0\n100 1\nfull\n96 80\n")  # found in CI: a 1-pixel row
 def test_dso_camera_txt(scratch: Path, fault_log, data: bytes) -> None:
     _run(scratch, fault_log, "TUM monoVO camera.txt reader", data, lambda p: read_calibration_file(p, "dso"),
          _sane_calibration, name="camera.txt")

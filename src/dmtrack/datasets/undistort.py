@@ -301,8 +301,11 @@ def _border_ok(model: CameraModel, box: list[float], w: int, h: int) -> tuple[bo
     return bool(left.all()), bool(right.all()), bool(top.all()), bool(bottom.all())
 
 
-def _camera_from_box(box: list[float], w: int, h: int) -> PinholeCamera:
+def _camera_from_box(box: list[float], w: int, h: int, source: Path | None = None) -> PinholeCamera:
     min_x, max_x, min_y, max_y = box
+    if not (max_x > min_x and max_y > min_y):  # e.g. an input image one pixel high: no field of view to fit
+        raise DatasetError(f"the undistorted image has no extent ({max_x - min_x:.3g} × {max_y - min_y:.3g} in "
+                           "normalised coordinates): is the input image size sensible?", path=source)
     fx = (w - 1.0) / (max_x - min_x)
     fy = (h - 1.0) / (max_y - min_y)
     return PinholeCamera(fx, fy, -min_x * fx, -min_y * fy, w, h)
@@ -317,7 +320,7 @@ def _optimal_crop(model: CameraModel, w: int, h: int, source: Path | None = None
         left, right, top, bottom = _border_ok(model, box, w, h)
         oob_l, oob_r, oob_t, oob_b = not left, not right, not top, not bottom
         if not (oob_l or oob_r or oob_t or oob_b):
-            cam = _camera_from_box(box, w, h)
+            cam = _camera_from_box(box, w, h, source)
             _, ok = _to_input_pixels(model, _output_rays(cam))
             if ok.all():
                 return cam
@@ -357,7 +360,7 @@ def _optimal_full(model: CameraModel, w: int, h: int, source: Path | None = None
             path=source,
         )
     box = [float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()), float(xy[:, 1].max())]
-    return _camera_from_box(box, w, h)
+    return _camera_from_box(box, w, h, source)
 
 
 def _distortion_free(model: CameraModel) -> bool:
@@ -472,7 +475,7 @@ class Undistorter:
         if W < 2 or H < 2:
             raise InputError(f"cannot resize a {W}x{H} image", path=source)
         box = [-model.cx / model.fx, (W - 1 - model.cx) / model.fx, -model.cy / model.fy, (H - 1 - model.cy) / model.fy]
-        cam = _camera_from_box(box, w, h)
+        cam = _camera_from_box(box, w, h, source)
         uv = model.normalised_to_pixel(model.distort(_output_rays(cam)))  # type: ignore[attr-defined]
         map_x = np.clip(uv[..., 0], 0.0, W - 1.0).astype(np.float32)
         map_y = np.clip(uv[..., 1], 0.0, H - 1.0).astype(np.float32)

@@ -219,34 +219,27 @@ def test_run_imports_no_module_it_does_not_use():
     """``import dmtrack`` and what ``dmtrack run`` imports before its first frame (the API, the features, the run's
     modules) leave out scipy's optimisation and transform modules, matplotlib, torch and rerun: they cost start-up
     time and memory (scipy.spatial alone 0.2 s and 40 MB) and are imported where a command uses them."""
-    import subprocess
-    import sys
-
-    code = (
-        "import sys\n"
-        "import dmtrack, dmtrack.api, dmtrack.cli, dmtrack.pipeline.run, dmtrack.initialization.initializer\n"
-        "from dmtrack.features import get_feature\n"
-        "get_feature('gray')\n"
-        "heavy = ('scipy.spatial', 'scipy.optimize', 'scipy.sparse', 'matplotlib', 'torch', 'rerun')\n"
-        "print(sorted(m for m in sys.modules if m.startswith(heavy)))\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    setup = ("import dmtrack, dmtrack.api, dmtrack.cli, dmtrack.pipeline.run, dmtrack.initialization.initializer\n"
+             "from dmtrack.features import get_feature\n"
+             "get_feature('gray')\n")
+    heavy = ("scipy.spatial", "scipy.optimize", "scipy.sparse", "matplotlib", "torch", "rerun")
+    assert _modules_after(setup, heavy) == "[]"
 
 
 def test_help_loads_no_heavy_module():
     """``dmtrack --help`` builds every subcommand's parser without importing numba, scipy, torch, matplotlib, the
     odometry or the pipeline (about 0.3 s; with the pipeline 1.0 s): a subcommand's parser lives where importing it
     costs little, its command is imported when it runs. (numpy and cv2 still come with the dataset readers' parsers.)"""
+    setup = "from dmtrack.cli import build_parser\nbuild_parser().format_help()\n"
+    heavy = ("numba", "scipy", "torch", "matplotlib", "dmtrack.pipeline", "dmtrack.odometry")
+    assert _modules_after(setup, heavy) == "[]"
+
+
+def _modules_after(setup: str, heavy: tuple[str, ...]) -> str:
+    """The modules starting with one of ``heavy`` that a fresh interpreter holds after running ``setup``."""
     import subprocess
     import sys
 
-    code = (
-        "import sys\n"
-        "from dmtrack.cli import build_parser\n"
-        "build_parser().format_help()\n"
-        "heavy = ('numba', 'scipy', 'torch', 'matplotlib', 'dmtrack.pipeline', 'dmtrack.odometry')\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m.startswith(heavy)))\n"
-    )
+    code = f"import sys\n{setup}print(sorted(m for m in sys.modules if m.startswith({heavy!r})))\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    return out.stdout.strip()

@@ -64,9 +64,8 @@ class FinishedMap:
 
     __slots__ = ("_idepth", "_var", "n_updates")
 
-    def __init__(self, dm: Any) -> None:
-        self._idepth, self._var = dm.tracking_depth()
-        self.n_updates = int(dm.n_updates)
+    def __init__(self, idepth: np.ndarray, var: np.ndarray, n_updates: int) -> None:
+        self._idepth, self._var, self.n_updates = idepth, var, int(n_updates)
 
     def tracking_depth(self) -> tuple[np.ndarray, np.ndarray]:
         return self._idepth, self._var
@@ -139,7 +138,7 @@ class WindowedKeyframes:
             self._moved.add(new_id)
         # held until it leaves: what its emission reads, not the map's working state (ten (H, W) arrays) nor its
         # full-resolution gradients (the window reads its coarser levels)
-        self._held[old_id] = (old_kf, FinishedMap(old_dm))
+        self._held[old_id] = (old_kf, FinishedMap(idepth, var, old_dm.n_updates))  # the window only read them
         old_kf.levels[0].release_gradients()
         self._emit_left(update.left)  # the finished keyframe too when the window began anew (a rejected optimisation)
         on_window = getattr(self.sink, "on_window", None)  # type: ignore[attr-defined]

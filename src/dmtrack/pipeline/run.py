@@ -128,7 +128,6 @@ class SequenceRun:
         self.kept: dict[int, Any] = {}  # frames read for the geometric start, given to the odometry next
         self.t_io = self.t_feat = self.compile_s = 0.0
         self.t_start = 0.0  # perf_counter() when the run's clock (wall_s, fps) starts: after the warm-up
-        self._run_start: RunStart | None = None
         self.startup: dict[str, float | None] = {}  # metrics.json's "startup" (run(), _begin(), _loop())
 
     def _attach(self) -> None:
@@ -209,13 +208,13 @@ class SequenceRun:
         self.startup = {"import_s": IMPORTED_AT, "run_s": process_age_s(), "warmup_s": None, "start_s": None,
                         "first_frame_s": None}
         frames = self._frames(stops)
-        run_start = self._run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
+        run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
         self.t_start = time.perf_counter()
         try:
             self._begin(run_start, stops, warmup)
             bar = _progress(None if self.stop is None else self.stop - self.start, self.seq.name, self.feature.name,
                             progress)
-            self._loop(frames, [run_start.initial_map(c) for c in self.configs], stops, bar)
+            self._loop(frames, run_start, stops, bar)
         except (KeyboardInterrupt, OutputError) as e:  # stop here; what is finished is saved, then e is re-raised
             halted_by = e
         finally:
@@ -291,7 +290,8 @@ class SequenceRun:
                 self.kept[j] = fut  # reading one is raised when the odometry comes to it, as without read-ahead)
         run_start.end(i - self.start)
 
-    def _loop(self, frames: Any, maps: list[Any], stops: _StopBetweenFrames, bar: Any) -> None:
+    def _loop(self, frames: Any, run_start: RunStart, stops: _StopBetweenFrames, bar: Any) -> None:
+        maps = [run_start.initial_map(c) for c in self.configs]
         # a signal during the warm-up stops the run before its first frame
         for i, (timestamp, image, fmap, dt_io, dt_feat, depth) in frames if stops.pending is None else ():
             self.t_io += dt_io
@@ -308,8 +308,8 @@ class SequenceRun:
             image = fmap = depth = None  # not kept while the next frame is awaited (157 MB for dense SIFT)
             if any(m is not None and i >= m.frame_index for m in maps):  # the odometries have copied their maps
                 maps = [None if m is not None and i >= m.frame_index else m for m in maps]
-                if all(m is None for m in maps) and self._run_start is not None:
-                    self._run_start.release_maps()
+                if all(m is None for m in maps):
+                    run_start.release_maps()
             if self.startup.get("first_frame_s") is None:
                 self.startup["first_frame_s"] = process_age_s()
             if bar is not None:

@@ -189,13 +189,9 @@ def main(argv: list[str] | None = None) -> int:
         if run_dir is not None:  # numba's cache warm before anything is timed
             i = cmd.index("--max-frames")
             run_process([*cmd[: i + 1], "5", *cmd[i + 2 :]], env)
-    cpu = platform.processor() or platform.machine()
-    try:
-        cpu = next(ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                   if ln.startswith("model name"))  # fmt: skip
-    except (OSError, StopIteration):
-        pass
-    machine = f"{os.cpu_count()} cores, {cpu}"
+    from dmtrack.io.machine import cpu_model
+
+    machine = f"{os.cpu_count()} cores, {cpu_model()}"
     runs: list[dict] = []
     with (out / "runs.jsonl").open("w") as log:
         for r in range(a.rounds):

@@ -54,3 +54,42 @@ def release_free_memory() -> bool:
 
 
 _LIBC = None
+
+
+def numba_blas_without_scipy_linalg() -> bool:
+    """Load ``scipy.linalg.cython_blas`` — the table of BLAS functions that numba looks up — on its own, without
+    running ``scipy.linalg``'s ``__init__``; return whether it was loaded here.
+
+    numba imports that module when it sets up its compiler (``numba.np.arraymath`` checks that BLAS is there), and
+    Python imports a submodule's package first: all of ``scipy.linalg``, 0.1 s and 27 MB resident for a module of
+    1.6 MB that none of dmtrack's kernels calls (they avoid BLAS). The extension module is the same object either way:
+    put in ``sys.modules`` under its own name, as the import system would, it is what numba's check and any later
+    ``import scipy.linalg.cython_blas`` find, and ``import scipy.linalg`` still works afterwards. Call it before the
+    first kernel is compiled or loaded; it does nothing when ``scipy.linalg`` or the module is already there, and
+    leaves the normal import to happen when the module cannot be found (a different scipy layout)."""
+    import importlib.machinery
+    import importlib.util
+    import os
+    import sys
+
+    name = "scipy.linalg.cython_blas"
+    if name in sys.modules or "scipy.linalg" in sys.modules:
+        return False
+    try:
+        import scipy
+    except ImportError:
+        return False
+    folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
+    path = next((p for p in (os.path.join(folder, "cython_blas" + s) for s in importlib.machinery.EXTENSION_SUFFIXES)
+                 if os.path.isfile(p)), None)  # fmt: skip
+    spec = importlib.util.spec_from_file_location(name, path) if path else None
+    if spec is None or spec.loader is None:
+        return False
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception:  # leave it to the normal import
+        del sys.modules[name]
+        return False
+    return True

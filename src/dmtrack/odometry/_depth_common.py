@@ -57,7 +57,11 @@ import numba
 import numpy as np
 
 from dmtrack.geometry.exact import matmul
+from dmtrack.io.machine import numba_blas_without_scipy_linalg
 from dmtrack.odometry.config import UPDATE_VARIANCE_MODES
+
+# before numba sets up its compiler (the first kernel): its BLAS check without all of scipy.linalg (0.1 s, 27 MB)
+numba_blas_without_scipy_linalg()
 
 # ------------------------------------------------------------------------------------------ constants
 #: Level at which the tracker's ``refPixelWasGood`` flags live (``SE3TRACKING_MIN_LEVEL``).

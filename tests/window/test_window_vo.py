@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
+from dmtrack.errors import InputError
 from dmtrack.odometry.config import VOConfig, WindowConfig
 from dmtrack.odometry.records import _inv_se3, _se3_part, _sim3
 from dmtrack.odometry.vo import VisualOdometry
@@ -29,12 +30,16 @@ def frames() -> list:
     return [seq[i] for i in range(N_FRAMES)]
 
 
-def _run(frames, config=CONFIG, threads=None, window=True, n=None):
+def _grey(image: np.ndarray) -> np.ndarray:
+    return image.astype(np.float32)
+
+
+def _run(frames, config=CONFIG, threads=None, window=True, n=None, feature=_grey):
     sink = MemorySink()
     vo = VisualOdometry(CAMERA, config, sink, threads=threads,
                         window=SlidingWindow(config, CAMERA) if window else None)  # fmt: skip
     for i, fr in enumerate(frames[:n]):
-        vo.process(fr.index, fr.timestamp, fr.image, fr.image.astype(np.float32), fr.depth if i == 0 else None)
+        vo.process(fr.index, fr.timestamp, fr.image, feature(fr.image), fr.depth if i == 0 else None)
     return vo, vo.finish(), sink
 
 
@@ -186,3 +191,27 @@ def test_held_keyframes_keep_only_what_their_emission_reads(frames) -> None:
         idepth, var = finished.tracking_depth()
         np.testing.assert_array_equal(emitted[kf_id].idepth, idepth)
         np.testing.assert_array_equal(emitted[kf_id].idepth_var, var)
+
+
+def _three_channels(image: np.ndarray) -> np.ndarray:
+    g = image.astype(np.float32)
+    return np.ascontiguousarray(np.dstack([g, 255.0 - g, np.float32(0.5) * g]))
+
+
+def test_grey_residuals_whatever_the_feature(frames) -> None:
+    """``window.channels = "grey"``: the window compares the keyframes' grey images. For a grey feature that is its
+    own channel (the same bytes); for a three-channel one the window holds one-channel pyramids of the same images
+    while the odometry tracks all three, and its optimisations differ from those on the three channels."""
+    grey = dataclasses.replace(CONFIG, window=dataclasses.replace(CONFIG.window, channels="grey"))
+    assert _run(frames, grey, n=20)[1].poses.tobytes() == _run(frames, CONFIG, n=20)[1].poses.tobytes()
+    vo = VisualOdometry(CAMERA, grey, MemorySink(), window=SlidingWindow(grey, CAMERA))
+    for i, fr in enumerate(frames[:25]):
+        vo.process(fr.index, fr.timestamp, fr.image, _three_channels(fr.image), fr.depth if i == 0 else None)
+    assert vo._kf.n_channels == 3
+    assert len(vo._window.keyframes) > 1 and all(kf.frame.n_channels == 1 for kf in vo._window.keyframes)
+    assert vo._window.stats.optimisations > 0
+    on_grey = vo.finish()
+    on_feature = _run(frames, CONFIG, n=25, feature=_three_channels)[1]
+    assert on_grey.poses.tobytes() != on_feature.poses.tobytes()
+    with pytest.raises(InputError, match="window.channels"):
+        WindowConfig(size=5, channels="gray")

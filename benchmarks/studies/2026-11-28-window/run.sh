@@ -34,3 +34,7 @@ for f in 676.5 553.5; do
   .venv/bin/dmtrack calibrate-from-video ../shared/data/tsukuba-150 --intrinsics $f,$f,320,240 \
     --out out/tsukuba-$f.txt --json > $here/tsukuba_from_$f.json
 done
+# Bit-Planes with the window's residuals on the grey images (2026-11-29)
+$py benchmarks/window_ab.py --sets all --features bitplanes --variant "w5=window.size=5" \
+    --variant "wg=window.size=5;window.channels=grey" --json $here/grey_residuals_bitplanes.json \
+    > $here/grey_residuals_bitplanes.log

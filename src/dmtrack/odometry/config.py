@@ -315,6 +315,7 @@ class RelocConfig:
 
 
 #: Values of ``WindowConfig.leave``.
+WINDOW_CHANNELS = ("feature", "grey")
 WINDOW_LEAVE_MODES = ("fixed", "marginalise")
 
 #: Values of ``WindowConfig.intrinsics_model``.
@@ -364,6 +365,9 @@ class WindowConfig:
     changes; the oldest keyframe in the window, with its points, is the fixed anchor) or ``"marginalise"`` (its
     points and pose are eliminated from the linearised problem and leave a Gaussian prior on the other poses, as DSO;
     after the first keyframe has left nothing is held fixed)."""
+    channels: str = "feature"
+    """What the residuals compare: ``"feature"`` the tracked feature's N channels (with its channel rule) or
+    ``"grey"`` the keyframes' grey images (DSO's residual), whatever feature tracks."""
     refine_intrinsics: bool = False
     """Also estimate fx, fy, cx, cy from the images, with the given calibration as a prior."""
     intrinsics_model: str = "f"
@@ -389,6 +393,9 @@ class WindowConfig:
                              f"not {_short(self.intrinsics_model)}")  # fmt: skip
         if self.leave not in WINDOW_LEAVE_MODES:
             raise InputError(f"window.leave must be one of {', '.join(WINDOW_LEAVE_MODES)}, not {_short(self.leave)}")
+        if self.channels not in WINDOW_CHANNELS:
+            raise InputError(f"window.channels must be one of {', '.join(WINDOW_CHANNELS)}, "
+                             f"not {_short(self.channels)}")  # fmt: skip
 
 
 INIT_MODES = ("random", "geometric", "groundtruth")

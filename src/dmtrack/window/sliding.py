@@ -97,6 +97,7 @@ class SlidingWindow:
                                         (camera.width, camera.height), 1.0, config.tracker.camera_pixel_noise2,
                                         use_numba)  # fmt: skip
         self._channels: int | None = None
+        self._use_numba = use_numba
         self.keyframes: list[WindowKeyframe] = []
         self.stats = WindowStats(leave=self.config.leave)
         self.last_report: BundleReport | None = None
@@ -120,8 +121,20 @@ class SlidingWindow:
     def start(self, keyframe_id: int, frame: Any, T_wc: np.ndarray, scale: float) -> WindowUpdate:
         """Begin anew with this keyframe."""
         update = self.clear()
-        self.keyframes.append(WindowKeyframe(keyframe_id, frame, _inv_se3(np.asarray(T_wc, np.float64)), float(scale)))
+        self.keyframes.append(WindowKeyframe(keyframe_id, self._view(frame), _inv_se3(np.asarray(T_wc, np.float64)),
+                                             float(scale)))  # fmt: skip
         return update
+
+    def _view(self, frame: Any) -> Any:
+        """What the window reads of a keyframe: its frame, or with ``channels = "grey"`` a grey pyramid of the
+        frame's image (the same levels; the tracked feature's pyramid is not held by the window then)."""
+        if self.config.channels != "grey":
+            return frame
+        from dmtrack.features.gray import GrayFeature
+        from dmtrack.odometry.frame import build_frame
+
+        return build_frame(frame.index, frame.timestamp, frame.image, GrayFeature().compute(frame.image),
+                           frame.camera, len(frame.levels), self._use_numba)  # fmt: skip
 
     def advance(self, finished_id: int, idepth: np.ndarray, var: np.ndarray, keyframe_id: int, frame: Any,
                 T_wc: np.ndarray) -> WindowUpdate:  # fmt: skip
@@ -142,7 +155,8 @@ class SlidingWindow:
         if pts is not None:
             pts.d = pts.d_map / host.scale
         host.points = pts
-        self.keyframes.append(WindowKeyframe(keyframe_id, frame, _inv_se3(np.asarray(T_wc, np.float64)), float("nan")))
+        self.keyframes.append(WindowKeyframe(keyframe_id, self._view(frame), _inv_se3(np.asarray(T_wc, np.float64)),
+                                             float("nan")))  # fmt: skip
         update = WindowUpdate()
         if any(kf.points is not None for kf in self.keyframes):
             saved = [(kf.T_cw, None if kf.points is None else kf.points.d.copy()) for kf in self.keyframes]

@@ -38,6 +38,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -52,18 +53,44 @@ def _dmtrack() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "dmtrack.cli"]
 
 
+def _rss_parts(pid: int, peaks: dict[str, float], done: threading.Event) -> None:
+    """Until ``done``: the largest anonymous and file-backed resident memory (MB) of ``pid`` seen every 10 ms
+    (``/proc/PID/status``: RssAnon, RssFile; Linux)."""
+    while not done.is_set():
+        try:
+            with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+                for line in fh:
+                    key = line.split(":", 1)[0]
+                    if key in ("RssAnon", "RssFile"):
+                        mb = int(line.split()[1]) / 1024.0
+                        peaks[key] = max(peaks.get(key, 0.0), mb)
+        except (OSError, ValueError, IndexError):
+            return
+        done.wait(0.01)
+
+
 def run_process(args: list[str], env: dict[str, str] | None = None) -> dict[str, float]:
-    """Run one command to its end; wall, CPU (user + system) seconds and peak RSS (MB) of that process alone."""
+    """Run one command to its end; wall, CPU (user + system) seconds and peak RSS (MB) of that process alone, and
+    (Linux, sampled every 10 ms) the peaks of its anonymous memory — what only this process holds: heap, stacks,
+    the JIT's code — and of its file-backed memory — libraries' and files' pages, shared and given back by the
+    system as it needs them."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    peaks: dict[str, float] = {}
+    done = threading.Event()
+    sampler = threading.Thread(target=_rss_parts, args=(proc.pid, peaks, done), daemon=True)
+    sampler.start()
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
+    done.set()
+    sampler.join()
     code = os.waitstatus_to_exitcode(status)
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if code != 0:
         raise SystemExit(f"command failed ({code}): {' '.join(args)}\n{err[-2000:]}")
     return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "user_s": usage.ru_utime,
-            "sys_s": usage.ru_stime, "peak_mb": usage.ru_maxrss / 1024.0}
+            "sys_s": usage.ru_stime, "peak_mb": usage.ru_maxrss / 1024.0,
+            "peak_anon_mb": peaks.get("RssAnon"), "peak_file_mb": peaks.get("RssFile")}
 
 
 def lsd_inputs(sequence: Path, frames: int, out: Path) -> tuple[Path, Path, int]:
@@ -96,6 +123,9 @@ def summarise(runs: list[dict]) -> dict:
     for name in names:
         rows = [r for r in runs if r["variant"] == name]
         s = {k: _median(rows, k) for k in ("wall_s", "cpu_s", "peak_mb")}
+        for k in ("peak_anon_mb", "peak_file_mb"):
+            if all(r.get(k) is not None for r in rows):
+                s[k] = _median(rows, k)
         s["rounds"] = len(rows)
         s["wall_all"] = [round(r["wall_s"], 2) for r in rows]
         s["peak_max_mb"] = max(r["peak_mb"] for r in rows)
@@ -121,14 +151,16 @@ def table(summary: dict, frames: int, machine: str, date: str) -> str:
         f"Whole process, {frames} frames, medians of {max(s['rounds'] for s in summary.values())} interleaved rounds "
         f"({machine}, {date}; `benchmarks/speed_vs_lsd.py`):",
         "",
-        "| | wall | speed vs LSD-SLAM | CPU (user + sys) | peak memory | dmtrack's loop | first frame after launch |",
-        "|---|---|---|---|---|---|---|",
+        "| | wall | speed vs LSD-SLAM | CPU (user + sys) | peak memory | of it: anonymous / file-backed (peaks) "
+        "| dmtrack's loop | first frame after launch |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for name, s in summary.items():
         loop = f"{s['loop_fps']:.1f} fps" if "loop_fps" in s else "–"
         first = f"{s['first_frame_s']:.2f} s" if "first_frame_s" in s else "–"
+        parts = f"{s['peak_anon_mb']:.0f} / {s['peak_file_mb']:.0f} MB" if "peak_anon_mb" in s else "–"
         lines.append(f"| {name} | {s['wall_s']:.1f} s | {s.get('speed_vs_lsd', float('nan')):.2f}× | "
-                     f"{s['cpu_s']:.1f} s | {s['peak_mb']:.0f} MB | {loop} | {first} |")
+                     f"{s['cpu_s']:.1f} s | {s['peak_mb']:.0f} MB | {parts} | {loop} | {first} |")
     return "\n".join(lines) + "\n"
 
 

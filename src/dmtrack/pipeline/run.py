@@ -503,6 +503,9 @@ def warm_up(feature: Any, config: VOConfig | None = None, *, strict: bool = Fals
         result = SequenceRun(_WarmupSequence(), feat, [config], [None]).run(warmup=False, progress=False)[0]
         if result.halted_by is not None:
             raise result.halted_by
+        from dmtrack.odometry._cloud import warm_up as warm_up_points
+
+        warm_up_points()  # a keyframe's points, which the run folder's point cloud and the viewers read
     except Exception:  # the real run raises the same error
         if strict:
             raise

@@ -215,3 +215,7 @@ def test_grey_residuals_whatever_the_feature(frames) -> None:
     assert on_grey.poses.tobytes() != on_feature.poses.tobytes()
     with pytest.raises(InputError, match="window.channels"):
         WindowConfig(size=5, channels="gray")
+    blind = VisualOdometry(CAMERA, grey, MemorySink(), window=SlidingWindow(grey, CAMERA))
+    with pytest.raises(InputError, match="no image"):  # feature maps without their images: a clear error
+        for i, fr in enumerate(frames[:25]):
+            blind.process(fr.index, fr.timestamp, None, _three_channels(fr.image), fr.depth if i == 0 else None)

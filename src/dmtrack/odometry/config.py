@@ -314,8 +314,9 @@ class RelocConfig:
             raise InputError("relocalisation.max_candidates must be ≥ 1 and new_map_after ≥ 0")
 
 
-#: Values of ``WindowConfig.leave``.
+#: Values of ``WindowConfig.channels``.
 WINDOW_CHANNELS = ("feature", "grey")
+#: Values of ``WindowConfig.leave``.
 WINDOW_LEAVE_MODES = ("fixed", "marginalise")
 
 #: Values of ``WindowConfig.intrinsics_model``.

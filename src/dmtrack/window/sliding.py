@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from dmtrack.errors import InputError
 from dmtrack.geometry.exact import norm
 from dmtrack.odometry.config import ChannelRule, VOConfig, WindowConfig
 from dmtrack.odometry.records import _inv_se3
@@ -130,6 +131,9 @@ class SlidingWindow:
         frame's image (the same levels; the tracked feature's pyramid is not held by the window then)."""
         if self.config.channels != "grey":
             return frame
+        if frame.image is None:
+            raise InputError(f"window.channels=grey: frame {frame.index} has no image to take the grey levels from "
+                             "(give the odometry its images, or keep window.channels=feature)")  # fmt: skip
         from dmtrack.features.gray import GrayFeature
         from dmtrack.odometry.frame import build_frame
 

@@ -33,10 +33,13 @@ def _bench(out: Path) -> list[str]:
 
 
 def _finished(out: Path) -> dict[str, tuple[str, int]]:
-    """Complete cells: path → (sha256 of metrics.json, its mtime in ns)."""
+    """Complete cells: path → (sha256 of metrics.json, its mtime in ns). A cell is written in a temporary folder
+    (``.NAME.tmp-…``) and renamed when complete: a metrics.json inside one belongs to a cell that was killed before
+    its rename, which the resume throws away and computes again — not a finished cell."""
     return {
         str(p.parent.relative_to(out)): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
         for p in sorted((out / "runs").rglob("metrics.json"))
+        if not any(".tmp-" in part or ".trash-" in part for part in p.relative_to(out).parts)
     } if (out / "runs").exists() else {}
 
 

@@ -286,8 +286,11 @@ class SequenceRun:
                     self.kept[i] = frame
                 run_start.add(i, frame.timestamp, crop_image(frame.image, self.box))
                 i += 1
-            for j, fut in ahead:  # read ahead, not needed by the start: the odometry's next frames (an error
-                self.kept[j] = fut  # reading one is raised when the odometry comes to it, as without read-ahead)
+        # read ahead, not needed by the start: the odometry's next frames (an error reading one is raised when the
+        # odometry comes to it, as without read-ahead). Kept only now that the reader has finished them: a read still
+        # queued when its future was kept found that future in `kept` and waited on itself (a hang of the run)
+        for j, fut in ahead:
+            self.kept[j] = fut
         run_start.end(i - self.start)
 
     def _loop(self, frames: Any, run_start: RunStart, stops: _StopBetweenFrames, bar: Any) -> None:

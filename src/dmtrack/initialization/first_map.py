@@ -24,10 +24,11 @@ from dmtrack.odometry.initial_map import InitialMap
 __all__ = ["grey_frame", "make_first_map"]
 
 
-def grey_frame(index: int, timestamp: float, image: np.ndarray, camera: PinholeCamera, levels: int) -> Frame:
+def grey_frame(index: int, timestamp: float, image: np.ndarray, camera: PinholeCamera, levels: int,
+               use_numba: bool = True) -> Frame:  # fmt: skip
     """A grey :class:`~dmtrack.odometry.frame.Frame` (intensity 0..255, as the ``gray`` feature) of an image."""
     grey = prepare_image(image, colour=False).astype(np.float32)
-    return build_frame(index, timestamp, image, grey, camera, levels)
+    return build_frame(index, timestamp, image, grey, camera, levels, use_numba)
 
 
 def make_first_map(

@@ -20,6 +20,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.exact import norm
+from dmtrack.initialization.first_map import grey_frame
 from dmtrack.odometry.config import ChannelRule, VOConfig, WindowConfig
 from dmtrack.odometry.records import _inv_se3
 from dmtrack.odometry.windowing import WindowUpdate
@@ -134,11 +135,7 @@ class SlidingWindow:
         if frame.image is None:
             raise InputError(f"window.channels=grey: frame {frame.index} has no image to take the grey levels from "
                              "(give the odometry its images, or keep window.channels=feature)")  # fmt: skip
-        from dmtrack.features.gray import GrayFeature
-        from dmtrack.odometry.frame import build_frame
-
-        return build_frame(frame.index, frame.timestamp, frame.image, GrayFeature().compute(frame.image),
-                           frame.camera, len(frame.levels), self._use_numba)  # fmt: skip
+        return grey_frame(frame.index, frame.timestamp, frame.image, frame.camera, len(frame.levels), self._use_numba)
 
     def advance(self, finished_id: int, idepth: np.ndarray, var: np.ndarray, keyframe_id: int, frame: Any,
                 T_wc: np.ndarray) -> WindowUpdate:  # fmt: skip

@@ -25,40 +25,28 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
-from dmtrack.evaluation.metrics import rpe_pairs  # noqa: E402
+from dmtrack.evaluation.metrics import _relative, _vector_angle_deg, rpe_pairs, rpe_paper  # noqa: E402
 from dmtrack.io.trajectory import read_tum  # noqa: E402
 
 
-def _angles(gt: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation and translation-angle errors (degrees) of the pairs (i, j); NaN where a translation is zero."""
-    Q = np.linalg.inv(gt[i]) @ gt[j]
-    P = np.linalg.inv(est[i]) @ est[j]
-    R = np.transpose(Q[:, :3, :3], (0, 2, 1)) @ P[:, :3, :3]
-    rot = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
-    a, b = Q[:, :3, 3], P[:, :3, 3]
-    na, nb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
-    ok = (na > 0) & (nb > 0)
-    cos = np.einsum("ij,ij->i", a, b) / np.where(ok, na * nb, 1.0)
-    trans = np.where(ok, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.nan)
-    return rot, trans
-
-
 def anatomy(run: Path, r_l: float = 1.0 / 3.0) -> dict:
+    """The paper's RPE of one run folder per length in degrees (the metric's own per-length means times L_k) and, at
+    the shortest length, the translation angle of pairs on one keyframe against pairs across keyframes (the
+    metric's own relative poses and angles)."""
     gt, est = read_tum(run / "groundtruth.txt"), read_tum(run / "trajectory.txt")
     if len(gt.timestamps) != len(est.timestamps):
         raise SystemExit(f"{run}: {len(gt.timestamps)} ground-truth poses against {len(est.timestamps)} estimated")
-    out: dict = {"run": str(run), "lengths": []}
-    pairs = rpe_pairs(gt, r_l)
-    for L, i, j in pairs:
-        rot, trans = _angles(gt.poses, est.poses, i, j)
-        out["lengths"].append({"L": L, "pairs": int(i.size), "rot_deg": float(np.nanmean(rot)),
-                               "trans_angle_deg": float(np.nanmean(trans))})  # fmt: skip
+    rpe = rpe_paper(gt, est, r_l)
+    out: dict = {"run": str(run), "lengths": [
+        {"L": float(L), "pairs": int(n), "rot_deg": float(r * L), "trans_angle_deg": float(t * L)}
+        for L, n, r, t in zip(rpe.lengths, rpe.pairs_per_length, rpe.per_length_rot, rpe.per_length_trans,
+                              strict=True)]}  # fmt: skip
     kf_path = run / "keyframes.txt"
     if kf_path.exists():
         kf = read_tum(kf_path)
         ref = np.searchsorted(kf.timestamps, est.timestamps + 1e-9, side="right") - 1
-        L, i, j = pairs[0]
-        _, trans = _angles(gt.poses, est.poses, i, j)
+        L, i, j = rpe_pairs(gt, r_l)[0]
+        trans, _ = _vector_angle_deg(_relative(gt.poses, i, j)[1], _relative(est.poses, i, j)[1])
         same = ref[i] == ref[j]
         out["shortest"] = {"L": L, "same_keyframe": {"pairs": int(same.sum()), "trans_angle_deg": _mean(trans[same])},
                            "across_keyframes": {"pairs": int((~same).sum()),
@@ -67,7 +55,7 @@ def anatomy(run: Path, r_l: float = 1.0 / 3.0) -> dict:
 
 
 def _mean(x: np.ndarray) -> float | None:
-    return float(np.nanmean(x)) if x.size else None
+    return float(np.mean(x)) if x.size else None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -55,8 +55,7 @@ def _quat_from_orthogonal_matrix(m: np.ndarray) -> np.ndarray:
                    m[..., 1, 0] - m[..., 0, 1]], axis=-1)  # fmt: skip
     q3 = np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1],
                    1 + trace], axis=-1)  # fmt: skip
-    q = np.where(choice == 0, q0, np.where(choice == 1, q1, np.where(choice == 2, q2, q3)))
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return _normalised(np.where(choice == 0, q0, np.where(choice == 1, q1, np.where(choice == 2, q2, q3))))
 
 
 def _rotvec_from_quat(q: np.ndarray) -> np.ndarray:

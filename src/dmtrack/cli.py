@@ -317,6 +317,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"accuracy: RPE rotation {m['rpe_rot_deg_per_m']:.3f} deg/unit, translation angle "
               f"{m['rpe_trans_angle_deg_per_m']:.3f} deg/unit (r_l = {m['r_l']:.4g}), ATE {m['ate_rmse']:.4f} "
               f"(Sim3), {m['matched_poses']} poses")
+        from dmtrack.evaluation.metrics import rotation_gain_text
+
+        for line in rotation_gain_text(m.get("rotation_gain")):
+            print(line)
     elif "evaluation_error" in m:
         print(f"accuracy: not evaluated ({m['evaluation_error']})")
     if m.get("slam"):
@@ -504,7 +508,7 @@ def _feature_options(items: list[str] | None, device: str | None = None) -> dict
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from dmtrack.evaluation import evaluate
+    from dmtrack.evaluation import evaluate, rotation_gain_text
     from dmtrack.io.trajectory import read_trajectory
 
     gt = read_trajectory(args.groundtruth, args.format, times=args.times)
@@ -519,7 +523,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     print(f"ATE RMSE ({args.align} aligned)     {result['ate_rmse']:.6f} {unit}   (scale {result['ate_scale']:.6g})")
     print(f"RPE rotation                {result['rpe_rot_deg_per_m']:.6f} deg/{unit}   (r_l = {args.r_l:g})")
     print(f"RPE translation angle       {result['rpe_trans_angle_deg_per_m']:.6f} deg/{unit}")
+    for line in rotation_gain_text(result.get("rotation_gain"), result.get("rotation_gain_frames")):
+        print(line)
     return 0
+
 
 
 def _add_self_calibration_parser(subparsers: argparse._SubParsersAction) -> None:

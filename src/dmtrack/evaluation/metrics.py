@@ -264,6 +264,92 @@ class RpeStats:
     pairs: np.ndarray
 
 
+# -- rotation gain: a calibration check --------------------------------------------------------------
+ROTATION_GAIN_FRAMES = 15
+"""Frames between the two poses of a pair in :func:`rotation_gain` (half a second at 30 Hz)."""
+
+
+@dataclass(frozen=True, eq=False)
+class RotationGain:
+    """How much of the ground truth's rotation the estimate shows, per camera axis (see :func:`rotation_gain`).
+
+    Attributes
+    ----------
+    gain : (3,) float — x (right), y (down), z (forward) of the first camera of each pair; NaN for an axis about which
+        the ground truth hardly turns (RMS turn below ``min_turn_deg``).
+    rms_turn_deg : (3,) float — RMS of the ground truth's turn about each axis over the pairs (degrees).
+    pairs : number of pairs (i, i + frames).
+    frames : the frames between the two poses of a pair.
+    """
+
+    gain: np.ndarray
+    rms_turn_deg: np.ndarray
+    pairs: int
+    frames: int
+
+
+def _rotation_vectors(R: np.ndarray) -> np.ndarray:
+    """(K, 3) rotation vectors (axis × angle, radians) of (K, 3, 3) rotations of angle below π."""
+    angle = _rotation_angle_rad(R)
+    v = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=-1)
+    sin = np.sin(angle)
+    factor = np.where(sin > 1e-12, angle / np.where(sin > 1e-12, sin, 1.0), 1.0)  # θ / sin θ → 1 as θ → 0
+    return v * factor[:, None]
+
+
+def rotation_gain(
+    gt: Trajectory, est: Trajectory, frames: int = ROTATION_GAIN_FRAMES, min_turn_deg: float = 0.5
+) -> RotationGain:
+    """Per camera axis, the least-squares slope of the estimate's turn on the ground truth's turn.
+
+    For every pair of associated poses ``(i, i + frames)`` the relative rotations ``R(P_i⁻¹ P_j)`` (estimate) and
+    ``R(Q_i⁻¹ Q_j)`` (ground truth) are taken as rotation vectors ``e``, ``g`` in camera ``i``'s frame; per axis
+    ``a`` the gain is ``Σ g_a e_a / Σ g_a²``: 1 when the estimate turns as much as the camera did. It is a check of
+    the camera's calibration rather than a score: with a focal length that is too long, or barrel distortion left in
+    the images, image-based estimates turn less than the camera about x and y (the image's motion is read as a
+    smaller angle), and the rotation–translation ambiguity of a narrow field of view turns the missing rotation into a
+    wrong direction of motion; about z (roll) neither matters. A consistent gain below about 0.9 about x and y with z
+    near 1 is that signature (7-Scenes' colour images with the depth camera's 585 px: 0.70–0.99 about x,
+    benchmarks/studies/2026-11-29-calibration). Invariant to a global similarity of the estimate (no alignment).
+
+    Raises
+    ------
+    ValueError
+        If the trajectories differ in length or ``frames`` < 1.
+    """
+    _check_pair(gt, est, "rotation gain")
+    if frames < 1:
+        raise ValueError(f"frames must be >= 1, got {frames}")
+    n = len(gt)
+    i = np.arange(max(n - frames, 0))
+    if i.size == 0:
+        nan = np.full(3, np.nan)
+        return RotationGain(nan, nan.copy(), 0, frames)
+    g = _rotation_vectors(_relative(gt.poses, i, i + frames)[0])
+    e = _rotation_vectors(_relative(est.poses, i, i + frames)[0])
+    gg = np.sum(g * g, axis=0)
+    rms = np.degrees(np.sqrt(gg / i.size))
+    defined = rms >= min_turn_deg
+    gain = np.where(defined, np.sum(g * e, axis=0) / np.where(defined, gg, 1.0), np.nan)
+    return RotationGain(gain, rms, int(i.size), frames)
+
+
+def rotation_gain_text(gain: list[float | None] | None, frames: int | None = None) -> list[str]:
+    """The rotation gain (``evaluate``'s ``rotation_gain``) as a line of text, with a hint when it has the signature of
+    a focal length that is too long or of distortion left in the images (x and y below 0.9, z near 1); no line
+    without one."""
+    if not gain or all(g is None for g in gain):
+        return []
+    parts = " ".join(f"{axis} {'–' if g is None else f'{g:.2f}'}" for axis, g in zip("xyz", gain, strict=True))
+    over = f" over {frames} poses" if frames else ""
+    line = f"rotation gain (the estimate's turn / the ground truth's{over}): {parts}"
+    x, y, z = gain
+    if x is not None and y is not None and max(x, y) < 0.9 and (z is None or 0.9 <= z <= 1.1):
+        line += ("; it turns less about x and y than the camera did: the focal length may be too long or the "
+                 "images distorted (check the calibration)")
+    return [line]
+
+
 def _pairs_by_path(poses: np.ndarray, delta: float, tol: float, all_pairs: bool) -> np.ndarray:
     """Index pairs ``(i, j)`` about ``delta`` of path apart, as evo's ``filter_pairs_by_path``."""
     n = poses.shape[0]
@@ -406,7 +492,9 @@ def evaluate(
     ``ate_mean``, ``ate_median``, ``ate_std``, ``ate_max``, ``ate_scale``, ``ate_alignment`` (4×4 as
     nested lists), ``rpe_lengths``, ``rpe_rot_per_length``, ``rpe_trans_per_length``,
     ``rpe_pairs_per_length``, ``rpe_undefined_trans_pairs``, ``gt_poses``, ``est_poses``,
-    ``gt_path_length`` (matched), ``max_matched_time_gap``, ``align``, ``r_l``, ``max_diff``.
+    ``gt_path_length`` (matched), ``max_matched_time_gap``, ``align``, ``r_l``, ``max_diff``, and
+    ``rotation_gain`` (x, y, z; None for an axis the ground truth hardly turns about) over pairs
+    ``rotation_gain_frames`` matched poses apart (:func:`rotation_gain`).
 
     Raises
     ------
@@ -438,6 +526,7 @@ def evaluate(
     try:
         a = ate(gt_m, est_m, align)
         r = rpe_paper(gt_m, est_m, r_l)
+        rg = rotation_gain(gt_m, est_m)
     except (ValueError, np.linalg.LinAlgError) as e:  # degenerate input the checks above did not foresee
         raise InputError(f"cannot evaluate {_who('estimate', est_name)} against "
                          f"{_who('ground truth', gt_name)}: {e}") from None
@@ -465,4 +554,6 @@ def evaluate(
         "align": align,
         "r_l": r_l,
         "max_diff": max_diff,
+        "rotation_gain": [None if not math.isfinite(v) else float(v) for v in rg.gain],
+        "rotation_gain_frames": rg.frames,
     }

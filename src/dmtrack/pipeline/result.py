@@ -186,7 +186,8 @@ def metrics_dict(
 
         try:
             ev = evaluate(gt, result.trajectory, max_diff=0.01, r_l=r_l, align="sim3")
-            for k in ("ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "matched_poses", "ate_scale"):
+            for k in ("ate_rmse", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "matched_poses", "ate_scale",
+                      "rotation_gain"):
                 m[k] = ev[k]
             if result.slam is not None and result.vo_trajectory is not None:
                 ev = evaluate(gt, result.vo_trajectory, max_diff=0.01, r_l=r_l, align="sim3")

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The calibration study of 2026-11-29 (issue 38); from the repository root, with ../shared beside it.
+# LSD-SLAM's trajectories come from tools/lsd_oracle (build it with tools/lsd_oracle/build.sh): LSD=path/to/lsd_oracle.
+set -euo pipefail
+D=benchmarks/studies/2026-11-29-calibration
+SEQ=../shared/data/7scenes-0000-0699
+PY=${PY:-.venv/bin/python}
+OUT=${OUT:-out/studies/calibration}
+mkdir -p "$OUT"
+
+# 1. rotation gains: dmtrack grey on the 11 held-back runs, documented 585 and (555, -0.04)
+for run in 350:350 50:160 100:160 150:160 200:160 250:160 300:160 350:160 400:160 450:160 500:160; do
+  s=${run%%:*}; n=${run#*:}
+  NUMBA_NUM_THREADS=1 .venv/bin/dmtrack run $SEQ --start $s --max-frames $n --out "$OUT/s$s-n$n-off" --no-progress \
+    --no-pointcloud --no-depth-images
+  NUMBA_NUM_THREADS=1 .venv/bin/dmtrack run $SEQ --start $s --max-frames $n --intrinsics $D/7scenes-colour-f555-k1-0.04.txt \
+    --out "$OUT/s$s-n$n-c555" --no-progress --no-pointcloud --no-depth-images
+done
+(for v in off c555; do $PY $D/rotation_gain.py runs "$OUT"/*-$v; done) > $D/gains_dmtrack_grey.txt
+if [ -n "${LSD:-}" ]; then
+  for r in all:0:700 h350:350:700 s200:200:360 s100:100:260; do
+    IFS=: read -r name a b <<< "$r"
+    for i in $(seq $a $((b - 1))); do printf '%s/frame-%06d.color.jpg\n' "$(realpath $SEQ)" $i; done > "$OUT/$name-list.txt"
+    printf '0.9140625 1.21875 0.50078125 0.50104167 0\n640 480\nnone\n640 480\n' > "$OUT/calib.txt"
+    "$LSD" files="$OUT/$name-list.txt" calib="$OUT/calib.txt" out="$OUT/lsd-$name"
+    $PY $D/rotation_gain.py lsd $SEQ "$OUT/lsd-$name.txt" $a
+  done > $D/gains_lsd_slam.txt
+fi
+(for fr in 0:350 350:700; do $PY $D/rotation_gain.py two-view $SEQ --frames $fr --focal 585,555,525 --k1=-0.08,-0.04,0; done) \
+  > $D/two_view.txt
+$PY $D/rotation_gain.py checks "$OUT/s200-n160-off" $SEQ 200 > $D/checks_scan200.txt
+NUMBA_NUM_THREADS=1 $PY $D/next_keyframe_oracle.py "$OUT/oracle-200" $SEQ --start 200 --max-frames 160
+NUMBA_NUM_THREADS=1 $PY $D/next_keyframe_oracle.py "$OUT/oracle-0" $SEQ --max-frames 350
+
+# 2. the images' own preference: the odometry's photometric error over (f, k1)
+$PY $D/residual_grid.py $SEQ --out "$OUT/grid0" --max-frames 350 && cp "$OUT/grid0/grid.json" $D/grid_0-349.json
+$PY $D/residual_grid.py $SEQ --out "$OUT/grid350" --start 350 --max-frames 350 && cp "$OUT/grid350/grid.json" $D/grid_350-699.json
+$PY $D/residual_grid.py $SEQ --out "$OUT/gridf" --focal 540,555,570 --k1=-0.06,-0.04,-0.02 --max-frames 350 \
+  && cp "$OUT/gridf/grid.json" $D/grid_0-349_fine.json
+
+# 3. the held-back runs with those calibrations (7-Scenes only: the files are this camera's)
+HELD=7s-350-699,$(for s in 50 100 150 200 250 300 350 400 450 500; do printf 'scan-%s,' $s; done | sed 's/,$//')
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
+  --variant "crop=--intrinsics=$D/7scenes-colour-f525-k1-0.08-crop.txt" \
+  --variant "full=--intrinsics=$D/7scenes-colour-f525-k1-0.08-full.txt" --json $D/held_calibrations.json
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
+  --variant "c555=--intrinsics=$D/7scenes-colour-f555-k1-0.04.txt" --off-from $D/held_calibrations.json --json $D/held_c555.json
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD --variant "w5=window.size=5" \
+  --variant "c555w5=--intrinsics=$D/7scenes-colour-f555-k1-0.04.txt;window.size=5" --off-from $D/held_calibrations.json \
+  --json $D/held_c555_window.json
+$PY benchmarks/window_ab.py --features gray-affine,rgb,lab --sets $HELD \
+  --variant "c555=--intrinsics=$D/7scenes-colour-f555-k1-0.04.txt" --json $D/held_c555_more_features.json
+$PY $D/table.py

@@ -1,0 +1,50 @@
+"""The held-back medians of this study's runs (``held_*.json``, written by ``benchmarks/window_ab.py``).
+
+Usage: ``python benchmarks/studies/2026-11-29-calibration/table.py`` (from the repository root).
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+HELD = ["7s-350-699"] + [f"scan-{s}" for s in range(50, 501, 50)]
+DISJOINT = ["7s-350-699"] + [f"scan-{s}" for s in range(350, 501, 50)]  # no frame before 350
+NAMES = {"off": "documented 585, pinhole", "w5": "585, window 5", "crop": "525, k1 −0.08 (crop)",
+         "full": "525, k1 −0.08 (full)", "c555": "555, k1 −0.04", "c555w5": "555, k1 −0.04, window 5"}
+
+
+def main() -> None:
+    rows = []
+    for name in ("held_calibrations.json", "held_c555.json", "held_c555_window.json"):
+        rows += json.loads((HERE / name).read_text())["rows"]
+    seen = set()
+    rows = [r for r in rows if (k := (r["run"], r["feature"], r["variant"])) not in seen and not seen.add(k)]
+    print("| feature | calibration | 11 held runs: rot / trans-angle °/m | change | 5 disjoint runs | change |")
+    print("|---|---|---|---|---|---|")
+    for feat in ("gray", "bitplanes"):
+        base = {}
+        for var in NAMES:
+            cells = []
+            for set_name, runs in (("held", HELD), ("disjoint", DISJOINT)):
+                sel = [r for r in rows if r["feature"] == feat and r["variant"] == var and r["run"] in runs
+                       and r.get("rpe_rot_deg_per_m") is not None]
+                if len(sel) != len(runs):
+                    cells += ["–", ""]
+                    continue
+                rot = statistics.median(r["rpe_rot_deg_per_m"] for r in sel)
+                tra = statistics.median(r["rpe_trans_angle_deg_per_m"] for r in sel)
+                if var == "off":
+                    base[set_name] = (rot, tra)
+                    change = ""
+                else:
+                    b = base[set_name]
+                    change = f"{100 * (rot / b[0] - 1):+.0f} % / {100 * (tra / b[1] - 1):+.0f} %"
+                cells += [f"{rot:.2f} / {tra:.1f}", change]
+            print(f"| {feat} | {NAMES[var]} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

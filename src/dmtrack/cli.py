@@ -528,7 +528,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def _add_self_calibration_parser(subparsers: argparse._SubParsersAction) -> None:
     """``calibrate-from-video`` (its command: :mod:`dmtrack.pipeline.cli_self_calibration`, imported when it runs)."""
     p = subparsers.add_parser(

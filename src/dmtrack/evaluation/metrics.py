@@ -307,8 +307,8 @@ def rotation_gain(
     ``a`` the gain is ``Σ g_a e_a / Σ g_a²``: 1 when the estimate turns as much as the camera did. It is a check of
     the camera's calibration rather than a score: with a focal length that is too long, or barrel distortion left in
     the images, image-based estimates turn less than the camera about x and y (the image's motion is read as a
-    smaller angle), and the rotation–translation ambiguity of a narrow field of view turns the missing rotation into a
-    wrong direction of motion; about z (roll) neither matters. A consistent gain below about 0.9 about x and y with z
+    smaller angle), and the rotation–translation ambiguity of a narrow field of view lets the translation absorb the
+    missing turn; about z (roll) neither matters. A consistent gain below about 0.9 about x and y with z
     near 1 is that signature (7-Scenes' colour images with the depth camera's 585 px: 0.70–0.99 about x,
     benchmarks/studies/2026-11-29-calibration). Invariant to a global similarity of the estimate (no alignment).
 

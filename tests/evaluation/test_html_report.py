@@ -147,6 +147,8 @@ def test_run_report_shows_the_metrics_and_is_self_contained(run_dir: Path):
     assert cells["RPE translation angle (deg/m)"] == fmt_value(m["rpe_trans_angle_deg_per_m"], 3)
     assert cells["fps (processed frames per wall-clock second)"] == fmt_value(m["fps"], 1)
     assert cells["Sim(3) scale of the alignment"] == fmt_value(m["ate_scale"], 3)
+    gain = cells["Rotation gain x / y / z (estimate's turn over the ground truth's)"]
+    assert gain == " / ".join(fmt_value(g, 2) for g in m["rotation_gain"]) and gain.count(" / ") == 2
     assert cells["Frames tracked / total"] == f"{m['tracked_frames']} / {m['total_frames']}"
     assert cells["Seed"] == str(m["seed"]) and cells["Matched poses"] == str(m["matched_poses"])
     total = m["io_ms"] + m["feature_ms"] + m["tracking_ms"] + m["mapping_ms"]

@@ -88,6 +88,11 @@ def _header(page: Page, m: dict[str, Any], info: dict[str, Any], unit: str, has_
     page.add(key_value_table(items))
 
 
+def _gain(gain: list[float | None] | None) -> str:
+    """``rotation_gain`` as "x / y / z" (– for an axis without a turn, or without the key)."""
+    return " / ".join(fmt_value(g, 2) for g in gain) if gain else "–"
+
+
 def _metrics(page: Page, m: dict[str, Any], unit: str, has_gt: bool) -> None:
     page.heading(2, "Metrics", toc=True)
     parts = [value_of(m, k) for k in ("io_ms", "feature_ms", "tracking_ms", "mapping_ms")]
@@ -97,6 +102,7 @@ def _metrics(page: Page, m: dict[str, Any], unit: str, has_gt: bool) -> None:
         (f"RPE translation angle (deg/{unit})", fmt_value(m.get("rpe_trans_angle_deg_per_m"), 3)),
         (f"ATE RMSE ({unit}, Sim(3)-aligned)", fmt_value(m.get("ate_rmse"), 4)),
         ("Sim(3) scale of the alignment", fmt_value(m.get("ate_scale"), 3)),
+        ("Rotation gain x / y / z (estimate's turn over the ground truth's)", _gain(m.get("rotation_gain"))),
         ("Matched poses", fmt_value(m.get("matched_poses"))),
         ("RPE length ratio r_l", fmt_value(value_of(m, "r_l"), 4)),
         ("fps (processed frames per wall-clock second)", fmt_value(m.get("fps"), 1)),
@@ -111,7 +117,9 @@ def _metrics(page: Page, m: dict[str, Any], unit: str, has_gt: bool) -> None:
         page.text(f"The run could not be evaluated: {m['evaluation_error']}", "note")
     page.text("RPE: the paper's scale-free relative pose error (§3.1) over 8 path lengths up to r_l of the "
               "ground-truth path, per ground-truth length unit; ATE: RMSE of the positions after a 7-DoF Umeyama "
-              "alignment.", "caption")  # fmt: skip
+              "alignment. Rotation gain: per camera axis, how much of the ground truth's turn the estimate shows over "
+              "15 poses; below about 0.9 about x and y with z near 1 is the signature of a focal length that is too "
+              "long or of distortion left in the images.", "caption")  # fmt: skip
     page.try_figure(lambda: _timing_figure(m), "time per frame")
 
 

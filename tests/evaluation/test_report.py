@@ -105,7 +105,8 @@ def bench(tmp_path: Path) -> Path:
     root = tmp_path / "bench"
     gt = circle_gt()
     make_run(root, "s1", "gray", metrics={"tracked_frames": 40, "rpe_rot_deg_per_m": 1.0,
-             "rpe_trans_angle_deg_per_m": 4.0, "ate_rmse": 0.01, "format": "7scenes"},
+             "rpe_trans_angle_deg_per_m": 4.0, "ate_rmse": 0.01, "format": "7scenes",
+             "rotation_gain": [0.82, None, 1.01]},
              gt=gt, est=estimate_of(gt, 40, 0.1, 0), depth_frames=(0, 12, 25))  # fmt: skip
     make_run(root, "s1", "gray-affine", metrics={"tracked_frames": 40, "rpe_rot_deg_per_m": 2.0,
              "rpe_trans_angle_deg_per_m": 3.0, "ate_rmse": 0.02, "format": "7scenes", "feature_ms": 3.0},
@@ -152,6 +153,8 @@ def test_collect_runs_finished_only_in_bench_order(bench: Path):
     failed = rows[2]
     assert failed["tracked_frames"] is None and failed["error"] == "RuntimeError: boom\nsecond line"
     assert rows[0]["total_ms"] == pytest.approx(6.5) and rows[0]["tracked_fraction"] == 1.0
+    assert (rows[0]["rotation_gain_x"], rows[0]["rotation_gain_y"], rows[0]["rotation_gain_z"]) == (0.82, None, 1.01)
+    assert rows[1]["rotation_gain_x"] is None and failed["rotation_gain_z"] is None  # not in its metrics / failed
 
 
 def test_report_tables_and_csvs(bench: Path):

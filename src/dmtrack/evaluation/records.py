@@ -33,9 +33,9 @@ from dmtrack.io.bench_layout import (
 RESULT_COLUMNS = (
     "dataset", "sequence", "feature", "status", "total_frames", "processed_frames", "tracked_frames",
     "tracked_fraction", "lost_at", "lost_reason", "rpe_rot_deg_per_m", "rpe_trans_angle_deg_per_m", "ate_rmse",
-    "ate_scale", "matched_poses", "gt_path_length", "r_l", "fps", "feature_ms", "io_ms", "tracking_ms",
-    "mapping_ms", "total_ms", "wall_s", "keyframes", "points", "channels", "width", "height", "start", "seed",
-    "error", "host", "run_dir",
+    "ate_scale", "matched_poses", "rotation_gain_x", "rotation_gain_y", "rotation_gain_z", "gt_path_length", "r_l",
+    "fps", "feature_ms", "io_ms", "tracking_ms", "mapping_ms", "total_ms", "wall_s", "keyframes", "points", "channels",
+    "width", "height", "start", "seed", "error", "host", "run_dir",
 )  # fmt: skip
 
 
@@ -196,6 +196,8 @@ def results_rows(records: Iterable[RunRecord]) -> list[dict[str, Any]]:
             parts = [value_of(m, k) for k in ("feature_ms", "io_ms", "tracking_ms", "mapping_ms")]
             row["total_ms"] = sum(p for p in parts if p is not None) if any(p is not None for p in parts) else None
             row["gt_path_length"] = ev.get("gt_path_length")
+            gain = m.get("rotation_gain") or [None, None, None]  # a calibration check (evaluation.rotation_gain)
+            row.update(rotation_gain_x=gain[0], rotation_gain_y=gain[1], rotation_gain_z=gain[2])
             if ev.get("error"):
                 row["error"] = f"evaluation: {ev['error']}"
             elif m.get("evaluation_error"):

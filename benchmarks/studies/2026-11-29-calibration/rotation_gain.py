@@ -37,21 +37,24 @@ REPO = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(REPO / "src"))
 
 
-def _rotvec(R: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(R).as_rotvec()
-
-
 def gains(gt: np.ndarray, est: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis gain and mean absolute error (degrees) of the k-frame relative rotations of ``est`` (N, 4, 4) against
-    ``gt`` (N, 4, 4), both camera-to-world."""
-    g = np.array([_rotvec((np.linalg.inv(gt[i]) @ gt[i + k])[:3, :3]) for i in range(len(gt) - k)])
-    e = np.array([_rotvec((np.linalg.inv(est[i]) @ est[i + k])[:3, :3]) for i in range(len(est) - k)])
-    return _gain(g, e)
+    """Per-axis gain (the metric's own, :func:`dmtrack.evaluation.rotation_gain`, with every axis counted) and mean
+    absolute error (degrees) of the k-frame relative rotations of ``est`` (N, 4, 4) against ``gt`` (N, 4, 4), both
+    camera-to-world."""
+    from dmtrack.evaluation import rotation_gain
+    from dmtrack.evaluation.metrics import _relative
+    from dmtrack.geometry.lie import so3_log
+    from dmtrack.io.trajectory import Trajectory
+
+    t = np.arange(len(gt), dtype=float)
+    gain = rotation_gain(Trajectory(t, gt), Trajectory(t, est), k, min_turn_deg=0.0).gain
+    i = np.arange(len(gt) - k)
+    g, e = (so3_log(_relative(P, i, i + k)[0]) for P in (gt, est))
+    return gain, np.degrees(np.abs(e - g).mean(0))
 
 
 def _gain(g: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same gain and error of rotation vectors that do not come from a trajectory (the two-view estimate's)."""
     return (g * e).sum(0) / (g * g).sum(0), np.degrees(np.abs(e - g).mean(0))
 
 
@@ -89,6 +92,8 @@ def cmd_lsd(a: argparse.Namespace) -> None:
 def cmd_two_view(a: argparse.Namespace) -> None:
     import cv2
 
+    from dmtrack.geometry.lie import so3_log
+
     folder = Path(a.sequence)
     poses = _seven_scenes_poses(folder)
     lo, hi = (int(v) for v in a.frames.split(":"))
@@ -112,8 +117,8 @@ def cmd_two_view(a: argparse.Namespace) -> None:
                 if E is None or E.shape != (3, 3):
                     continue
                 _, R, _, _ = cv2.recoverPose(E, a0, a1, np.eye(3), mask=mask)
-                e.append(_rotvec(R.T))  # R maps frame i's points into frame i + k: the turn from i to i + k is Rᵀ
-                g.append(_rotvec((np.linalg.inv(poses[i]) @ poses[i + a.k])[:3, :3]))
+                e.append(so3_log(R.T))  # R maps frame i's points into frame i + k: the turn from i to i + k is Rᵀ
+                g.append(so3_log((np.linalg.inv(poses[i]) @ poses[i + a.k])[:3, :3]))
             gain, err = _gain(np.array(g), np.array(e))
             print(_line(f"two-view f={f:g} k1={k1:+g} frames {lo}-{hi}", gain, err, len(g)), flush=True)
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.evaluation.alignment import ALIGN_MODES, AlignMode, align_trajectory
+from dmtrack.geometry.lie import so3_log
 from dmtrack.io.association import associate_trajectories
 from dmtrack.io.trajectory import Trajectory
 
@@ -288,15 +289,6 @@ class RotationGain:
     frames: int
 
 
-def _rotation_vectors(R: np.ndarray) -> np.ndarray:
-    """(K, 3) rotation vectors (axis × angle, radians) of (K, 3, 3) rotations of angle below π."""
-    angle = _rotation_angle_rad(R)
-    v = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=-1)
-    sin = np.sin(angle)
-    factor = np.where(sin > 1e-12, angle / np.where(sin > 1e-12, sin, 1.0), 1.0)  # θ / sin θ → 1 as θ → 0
-    return v * factor[:, None]
-
-
 def rotation_gain(
     gt: Trajectory, est: Trajectory, frames: int = ROTATION_GAIN_FRAMES, min_turn_deg: float = 0.5
 ) -> RotationGain:
@@ -325,8 +317,8 @@ def rotation_gain(
     if i.size == 0:
         nan = np.full(3, np.nan)
         return RotationGain(nan, nan.copy(), 0, frames)
-    g = _rotation_vectors(_relative(gt.poses, i, i + frames)[0])
-    e = _rotation_vectors(_relative(est.poses, i, i + frames)[0])
+    g = so3_log(_relative(gt.poses, i, i + frames)[0])
+    e = so3_log(_relative(est.poses, i, i + frames)[0])
     gg = np.sum(g * g, axis=0)
     rms = np.degrees(np.sqrt(gg / i.size))
     defined = rms >= min_turn_deg

@@ -1,9 +1,13 @@
-"""dmtrack.io.machine: numba's BLAS table loaded without all of scipy.linalg."""
+"""dmtrack.io.machine: numba's BLAS table loaded without all of scipy.linalg; LLVM's idle pages given back."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
+
+import pytest
+
+from dmtrack.io.machine import _clean_library_mappings
 
 
 def _python(code: str) -> str:
@@ -51,3 +55,80 @@ def test_nothing_is_done_where_scipy_linalg_is_already_there():
     code = ("import scipy.linalg\nfrom dmtrack.io.machine import numba_blas_without_scipy_linalg\n"
             "print(numba_blas_without_scipy_linalg())\n")  # fmt: skip
     assert _python(code) == "False"
+
+
+_SMAPS = """\
+7f0000000000-7f0000100000 r--p 00000000 08:01 11 /venv/llvmlite/binding/libllvmlite.so
+Size:               1024 kB
+Rss:                 512 kB
+Anonymous:             0 kB
+7f0000100000-7f0000300000 r-xp 00100000 08:01 11 /venv/llvmlite/binding/libllvmlite.so
+Rss:                2048 kB
+Anonymous:             0 kB
+7f0000300000-7f0000400000 r--p 00300000 08:01 11 /venv/llvmlite/binding/libllvmlite.so
+Rss:                 100 kB
+Anonymous:           100 kB
+7f0000400000-7f0000500000 rw-p 00400000 08:01 11 /venv/llvmlite/binding/libllvmlite.so
+Rss:                  64 kB
+Anonymous:            64 kB
+7f0000500000-7f0000600000 r-xs 00000000 08:01 12 /usr/lib/libLLVM-15.so
+Rss:                 256 kB
+Anonymous:             0 kB
+7f0000600000-7f0000700000 r-xp 00000000 08:01 12 /usr/lib/libLLVM-15.so
+Rss:                   0 kB
+Anonymous:             0 kB
+7f0000700000-7f0000800000 r-xp 00000000 08:01 13 /usr/lib/libcv2.so
+Rss:                 400 kB
+Anonymous:             0 kB
+7f0000800000-7f0000900000 r-xp 00000000 08:01 12 /usr/lib/libLLVM-15.so
+Rss:                  12 kB
+Anonymous:             0 kB
+7ffd00000000-7ffd00021000 rw-p 00000000 00:00 0                          [stack]
+Rss:                  20 kB
+Anonymous:            20 kB
+"""
+
+
+def test_only_unwritten_private_read_only_pages_of_the_named_libraries_are_given_back(tmp_path):
+    """A relocated read-only segment (pages of its own: RELRO), a writable or shared mapping, an empty one and other
+    libraries are left alone."""
+    smaps = tmp_path / "smaps"
+    smaps.write_text(_SMAPS)
+    assert _clean_library_mappings(("libllvmlite", "libLLVM"), str(smaps)) == [
+        (0x7F0000000000, 0x7F0000100000, 512 * 1024),
+        (0x7F0000100000, 0x7F0000300000, 2048 * 1024),
+        (0x7F0000800000, 0x7F0000900000, 12 * 1024),
+    ]
+    assert _clean_library_mappings(("libcv2",), str(smaps)) == [(0x7F0000700000, 0x7F0000800000, 400 * 1024)]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/smaps (Linux)")
+def test_llvm_pages_given_back_and_numba_still_compiles_and_loads():
+    """After ``import numba`` LLVM's library holds resident pages; they are given back (resident file-backed memory
+    falls by as much), and afterwards numba still compiles a new kernel and loads a cached one, with the right
+    results — the pages it needs are read back from the file."""
+    code = """
+import numpy as np, numba
+from dmtrack.io.machine import release_idle_library_pages
+
+def file_kb():
+    return next(int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('RssFile'))
+
+before = file_kb()
+released = release_idle_library_pages()
+after = file_kb()
+assert released > 8 << 20, released
+assert before - after >= 0.8 * released / 1024, (before, after, released)
+
+@numba.njit
+def poly(x):
+    return x * x - 3.0 * x + 2.0
+
+assert poly(4.0) == 6.0
+from dmtrack.odometry._cloud import warm_up
+warm_up()  # kernels from numba's cache (or compiled)
+assert release_idle_library_pages() > 0  # what compiling and loading read back, given back again
+assert poly(5.0) == 12.0 and np.isclose(poly(0.5), 0.75)
+print('ok')
+"""
+    assert _python(code) == "ok"

@@ -40,6 +40,11 @@ def release_free_memory() -> bool:
     Memory freed by numpy stays with the allocator, and its pages stay resident, when it sits below memory still in
     use; after a phase that freed much (the geometric start's frames and first map) this returns those pages, so
     the run's resident memory is what it holds. Returns whether any memory was released."""
+    libc = _libc()
+    return bool(libc and libc.malloc_trim(0))
+
+
+def _libc():  # glibc with ``malloc_trim`` and ``madvise`` typed, or False where there is none
     import ctypes
     import ctypes.util
 
@@ -48,12 +53,73 @@ def release_free_memory() -> bool:
         try:
             _LIBC = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
             _LIBC.malloc_trim.argtypes = [ctypes.c_size_t]
+            _LIBC.madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
         except (OSError, AttributeError):
             _LIBC = False
-    return bool(_LIBC and _LIBC.malloc_trim(0))
+    return _LIBC
 
 
 _LIBC = None
+
+#: Names of shared libraries whose pages :func:`release_idle_library_pages` gives back: LLVM's, which numba needs only
+#: to compile or to load a kernel, and whose static initialisers touch tens of MB of it at ``import numba``.
+IDLE_LIBRARIES = ("libllvmlite", "libLLVM")
+
+_MADV_DONTNEED = 4  # <sys/mman.h> on Linux
+
+
+def _clean_library_mappings(names: tuple[str, ...], smaps: str = "/proc/self/smaps") -> list[tuple[int, int, int]]:
+    """``(start, end, resident bytes)`` of the mappings of the libraries called ``names`` that can be given back
+    safely: private, not writable, file-backed and without a page of their own (``Anonymous: 0 kB`` in ``smaps``: no
+    relocated or otherwise written copy, so every resident page is the file's and reads back the same)."""
+    found: list[tuple[int, int, int]] = []
+    head: list[str] | None = None
+    rss = anonymous = -1
+
+    def close() -> None:
+        if head is not None and len(head) >= 6 and anonymous == 0 and rss > 0:
+            perms, base = head[1], head[5].rsplit("/", 1)[-1]
+            if perms.startswith("r") and "w" not in perms and perms.endswith("p") and base.startswith(names):
+                start, end = (int(x, 16) for x in head[0].split("-"))
+                found.append((start, end, rss * 1024))
+
+    with open(smaps, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0].endswith(":"):
+                if parts[0] == "Rss:":
+                    rss = int(parts[1])
+                elif parts[0] == "Anonymous:":
+                    anonymous = int(parts[1])
+                continue
+            close()
+            head, rss, anonymous = parts, -1, -1
+    close()
+    return found
+
+
+def release_idle_library_pages(names: tuple[str, ...] = IDLE_LIBRARIES) -> int:
+    """Give back the resident pages of the libraries ``names`` (by default LLVM's) that are copies of their files;
+    return the bytes that were resident in them (0 where nothing was done: not Linux, no such library).
+
+    ``import numba`` loads LLVM, whose static initialisers touch about 35 MB of its code and read-only data that are
+    not run again; loading the kernels from numba's cache touches more, and once they are loaded a run does not use
+    LLVM at all. Those pages count in the process's resident memory as long as they are mapped. This drops them
+    (``madvise(MADV_DONTNEED)``) from the mappings that hold nothing but the file's own bytes (private, read-only, no
+    written page: :func:`_clean_library_mappings`): a page used again — a kernel compiled or loaded later — is read
+    back from the file (the page cache), with the same bytes, so nothing changes but resident memory."""
+    import sys
+
+    libc = _libc() if sys.platform.startswith("linux") else False
+    if not libc:
+        return 0
+    try:
+        mappings = _clean_library_mappings(tuple(names))
+    except (OSError, ValueError):
+        return 0
+    return sum(resident for start, end, resident in mappings if libc.madvise(start, end - start, _MADV_DONTNEED) == 0)
 
 
 def numba_blas_without_scipy_linalg() -> bool:

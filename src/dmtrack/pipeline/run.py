@@ -26,7 +26,7 @@ from dmtrack.datasets.stream import EndOfStream, RealtimeFrames, live_source
 from dmtrack.errors import InputError, OutputError
 from dmtrack.geometry.camera import PinholeCamera, crop_image
 from dmtrack.initialization.run_start import RunStart
-from dmtrack.io.machine import process_age_s, release_free_memory
+from dmtrack.io.machine import process_age_s, release_free_memory, release_idle_library_pages
 from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry.config import CHANNEL_STAT_KEYS, VOConfig
 from dmtrack.odometry.sink import OutputSink
@@ -241,15 +241,18 @@ class SequenceRun:
         with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start") as pool:
             starting = pool.submit(self._start, run_start, stops)
             try:
+                release_idle_library_pages()  # LLVM's pages that numba's import touched; the warm-up reads back some
                 if warmup:
                     self.compile_s = sum(warm_up(self.feature, c) for c in self.configs)
                     if any(s is not None for s in self.slams):
                         self.compile_s += _warm_up_slam()
+                    release_idle_library_pages()  # the kernels are loaded; the start may still read some back
             finally:
                 self.t_start = time.perf_counter()
                 starting.result()
         self.startup.update(warmup_s=self.compile_s if warmup else None, start_s=time.perf_counter() - self.t_start)
         release_free_memory()  # what the warm-up and the start freed (their frames, maps, threads' heaps)
+        release_idle_library_pages()  # what the start read back: the run does not use LLVM any more
         for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in self.configs) if r):  # in metrics
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
         self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink,

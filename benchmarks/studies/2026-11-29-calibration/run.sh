@@ -51,3 +51,20 @@ $PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD --variant "w5
 $PY benchmarks/window_ab.py --features gray-affine,rgb,lab --sets $HELD \
   --variant "c555=--intrinsics=$D/7scenes-colour-f555-k1-0.04.txt" --json $D/held_c555_more_features.json
 $PY $D/table.py
+
+# 4. where the short-length translation angle comes from (translation_anatomy.py), grey, window off:
+#    the 11 held-back 7-Scenes runs at 585 (p…) and at (555, −0.04) (c…); start 200 from five random maps (r200_…)
+H=$OUT/anatomy; mkdir -p $H
+for s in 50 100 150 200 250 300 350 400 450 500 full; do
+  if [ $s = full ]; then a="--start 350"; else a="--start $s --max-frames 160"; fi
+  $PY -m dmtrack run $SEQ $a --out $H/p$s --no-pointcloud --no-depth-images --no-progress
+  $PY -m dmtrack run $SEQ $a --intrinsics $D/7scenes-colour-f555-k1-0.04.txt --out $H/c$s --no-pointcloud --no-depth-images \
+    --no-progress
+done
+for sd in 0 1 2 3 4; do
+  $PY -m dmtrack run $SEQ --start 200 --max-frames 160 --init random --seed $sd --out $H/r200_$sd --no-pointcloud \
+    --no-depth-images --no-progress
+done
+$PY $D/translation_anatomy.py $H/p{50,100,150,200,250,300,350,400,450,500,full} --json $D/translation_585.json
+$PY $D/translation_anatomy.py $H/c{50,100,150,200,250,300,350,400,450,500,full} --json $D/translation_c555.json
+$PY $D/translation_anatomy.py $H/r200_{0,1,2,3,4} $H/p200 --json $D/translation_start200.json

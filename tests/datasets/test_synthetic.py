@@ -480,3 +480,20 @@ def test_forward_motion_drives_down_a_hall() -> None:
         open_sequence("synthetic:motion=forward,fps=10,speed=10,n_frames=40,width=64,height=48")
     with pytest.raises(InputError, match="motion must be one of"):
         open_sequence("synthetic:motion=sideways")
+
+
+def test_intrinsics_change_what_the_odometry_is_told_not_the_images() -> None:
+    """``--intrinsics`` on a ``synthetic:`` source replaces ``camera`` (what the odometry assumes) and leaves the
+    rendering camera ``lens`` and so the images and depths as they were: a wrong calibration can be tried on them.
+    A slice keeps the replaced camera."""
+    from dmtrack.datasets import open_sequence
+
+    spec = "synthetic:n_frames=4,width=160,height=120,seed=3"
+    true = open_sequence(spec)
+    told = open_sequence(spec, intrinsics="150,150,79.5,59.5")
+    assert told.camera.fx == 150.0 and told.lens == true.lens == true.camera and true.lens.fx != 150.0
+    assert np.array_equal(np.asarray(told[2].image), np.asarray(true[2].image))
+    assert np.array_equal(told.depth(2), true.depth(2))
+    part = told.slice(1, 3)
+    assert part.camera.fx == 150.0 and part.lens == true.lens
+    assert np.array_equal(np.asarray(part[1].image), np.asarray(true[2].image))

@@ -295,6 +295,10 @@ class SyntheticSequence:
     Frames carry ``image`` (uint8 grey (H, W) or RGB (H, W, 3)), the exact ``pose`` T_wc and the exact
     ``depth`` (float32 metres, valid > 0 at every pixel).  Frame i is a pure function of the config and
     i: rendering it first or after any others gives identical arrays.
+
+    ``lens`` is the camera the frames are rendered with (the configuration's: ``fx=…`` in a ``synthetic:`` string);
+    ``camera`` is the one the odometry is told. They are the same unless ``camera`` is replaced (``--intrinsics``):
+    the images stay the same, so a wrong calibration can be tried on them against the known ``lens``.
     """
 
     format = "synthetic"
@@ -304,7 +308,10 @@ class SyntheticSequence:
         config.validate()
         self.config = config
         self.name = config.name if config.name is not None else f"synthetic-seed{config.seed}"
-        self.camera: PinholeCamera | None = config.camera()
+        # the camera the images are rendered with (the configuration's) and the one the odometry is told, which
+        # ``--intrinsics`` replaces (so a wrong calibration can be tried on the same images)
+        self.lens = config.camera()
+        self.camera: PinholeCamera | None = self.lens
         self.scene = make_scene(
             config.seed,
             colour=config.colour,
@@ -320,7 +327,7 @@ class SyntheticSequence:
         self._all_t = t
         self._all_poses = poses
         self._photo = _photometry(config.seed)
-        self._rays = self.camera.pixel_grid_rays().astype(np.float32)  # (H, W, 3) z = 1 rays
+        self._rays = self.lens.pixel_grid_rays().astype(np.float32)  # (H, W, 3) z = 1 rays
 
     # -- protocol -------------------------------------------------------------------------------
     @property
@@ -383,7 +390,9 @@ class SyntheticSequence:
             raise InputError(f"start frame {start} is outside the sequence (0..{n - 1})")
         if stop <= start:
             raise InputError(f"empty frame range {start}:{stop}")
-        return SyntheticSequence(self.config, _frames=self._frames[start:stop])
+        part = SyntheticSequence(self.config, _frames=self._frames[start:stop])
+        part.camera = self.camera  # what the odometry is told stays what it was
+        return part
 
     def __repr__(self) -> str:
         c = self.config
@@ -397,8 +406,7 @@ class SyntheticSequence:
     def depth(self, index: int) -> np.ndarray:
         """Exact depth of frame ``index``: (H, W) float32 metres."""
         k = self._absolute(index)
-        assert self.camera is not None
-        return render(self.scene, self.camera, self._all_poses[k], blur=self.config.blur)[1]
+        return render(self.scene, self.lens, self._all_poses[k], blur=self.config.blur)[1]
 
     def inverse_depth(self, index: int) -> np.ndarray:
         """Exact inverse depth of frame ``index``: (H, W) float32, 1/metres."""
@@ -427,7 +435,6 @@ class SyntheticSequence:
         σ ≈ 0.35 rad, so a surface point's lighting changes as the camera moves.
         """
         amp = np.float32(self.config.local_illumination)
-        assert self.camera is not None
         t = self._all_t[k]
         p = self._photo
         wob = np.sin(p.spot_f * t + p.spot_p)
@@ -450,8 +457,7 @@ class SyntheticSequence:
 
     def _render(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`radiance` of frame ``k`` of the full (unsliced) trajectory."""
-        assert self.camera is not None
-        img, depth = render(self.scene, self.camera, self._all_poses[k], blur=self.config.blur)
+        img, depth = render(self.scene, self.lens, self._all_poses[k], blur=self.config.blur)
         if self.config.local_illumination > 0.0:
             g = self._spot_gain(k, depth)
             img = img * (g if img.ndim == 2 else g[..., None])

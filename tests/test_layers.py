@@ -23,7 +23,7 @@ LAYERS: list[set[str]] = [
     {"features", "datasets"},
     {"odometry"},
     {"initialization"},
-    {"window"},
+    {"window", "calibration"},
     {"slam"},
     {"relocalisation"},
     {"training"},

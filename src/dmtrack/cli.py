@@ -532,23 +532,24 @@ def _add_self_calibration_parser(subparsers: argparse._SubParsersAction) -> None
     """``calibrate-from-video`` (its command: :mod:`dmtrack.pipeline.cli_self_calibration`, imported when it runs)."""
     p = subparsers.add_parser(
         "calibrate-from-video",
-        help="estimate the camera's intrinsics from a sequence's own images, without a board (sliding-window "
-             "photometric bundle adjustment, repeated to a fixed point; docs/window.md)",
+        help="estimate the camera's intrinsics from a sequence's own images, without a board (a self-calibrating "
+             "bundle adjustment of corner tracks on the odometry's poses, or the sliding window; docs/window.md)",
     )  # fmt: skip
     p.add_argument("sequence", metavar="SEQUENCE", help="video file, image folder or dataset")
     p.add_argument("--out", required=True, metavar="FILE", help="intrinsics file to write (fx fy cx cy)")
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY|FILE",
                    help="starting guess (default: the sequence's own, else fx = fy = 0.8 × width at the centre)")
     p.add_argument("--feature", default="gray", help="feature tracked with (default gray)")
-    p.add_argument("--model", choices=("f", "f-c", "fxfy-c"), default="f",
-                   help="what is estimated: one focal length (default; the principal point kept, as COLMAP), also "
-                        "the principal point, or fx, fy, cx, cy")
+    p.add_argument("--method", choices=("tracks", "window"), default="tracks", help="corner tracks (default) or window")
+    p.add_argument("--model", choices=("f", "f-k1", "f-c", "fxfy-c"), default="f",
+                   help="what is estimated: one focal length (default; the principal point kept, as COLMAP); "
+                        "tracks: also k1 (f-k1: a RadTan file); window: also the principal point, or fx, fy, cx, cy")
+    p.add_argument("--step", type=int, default=5, metavar="N", help="tracks: every N-th frame is a keyframe")
     p.add_argument("--start", type=int, default=0, metavar="N", help="first frame")
     p.add_argument("--max-frames", type=int, metavar="N", help="use at most N frames")
-    p.add_argument("--iterations", type=int, default=6, metavar="N", help="at most N runs (default 6)")
-    p.add_argument("--tolerance", type=float, default=0.002, metavar="T",
-                   help="stop when the focal length changes by less than this fraction (default 0.002)")
-    p.add_argument("--window", type=int, default=5, metavar="K", help="keyframes in the window (default 5)")
+    p.add_argument("--iterations", type=int, default=6, metavar="N", help="window: at most N runs (default 6)")
+    p.add_argument("--tolerance", type=float, default=0.002, metavar="T", help="window: stop at this change of f")
+    p.add_argument("--window", type=int, default=5, metavar="K", help="window: keyframes in the window (default 5)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_cmd_calibrate_from_video)

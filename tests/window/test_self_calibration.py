@@ -15,8 +15,8 @@ SYN = "synthetic:n_frames=45,width=320,height=240,seed=1"
 
 def test_calibrate_from_video_writes_the_file_run_reads(tmp_path, capsys) -> None:
     out = tmp_path / "cam.txt"
-    rc = main(["calibrate-from-video", SYN, "--intrinsics", "262.5,262.5,159.5,119.5", "--iterations", "2",
-               "--out", str(out), "--json", "--quiet"])  # fmt: skip
+    rc = main(["calibrate-from-video", SYN, "--method", "window", "--intrinsics", "262.5,262.5,159.5,119.5",
+               "--iterations", "2", "--out", str(out), "--json", "--quiet"])  # fmt: skip
     result = json.loads(capsys.readouterr().out)
     assert rc in (0, 3) and (rc == 0) == result["converged"]
     assert 1 <= len(result["history"]) <= 2 and result["history"][0]["start"][0] == 262.5
@@ -28,8 +28,8 @@ def test_calibrate_from_video_writes_the_file_run_reads(tmp_path, capsys) -> Non
 
 
 def test_calibrate_from_video_says_when_nothing_can_be_estimated(tmp_path, capsys) -> None:
-    rc = main(["calibrate-from-video", "synthetic:n_frames=8,width=320,height=240,seed=1", "--out",
-               str(tmp_path / "cam.txt")])  # fmt: skip
+    rc = main(["calibrate-from-video", "synthetic:n_frames=8,width=320,height=240,seed=1", "--method", "window",
+               "--out", str(tmp_path / "cam.txt")])  # fmt: skip
     assert rc != 0
     err = capsys.readouterr().err
     assert "no keyframe change to estimate the intrinsics from" in err

@@ -68,3 +68,30 @@ done
 $PY $D/translation_anatomy.py $H/p{50,100,150,200,250,300,350,400,450,500,full} --json $D/translation_585.json
 $PY $D/translation_anatomy.py $H/c{50,100,150,200,250,300,350,400,450,500,full} --json $D/translation_c555.json
 $PY $D/translation_anatomy.py $H/r200_{0,1,2,3,4} $H/p200 --json $D/translation_start200.json
+
+# 5. the calibration from corner tracks (dmtrack calibrate-from-video, its tracks method), chosen on 0–349 only
+for m in f f-k1; do
+  $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model $m --out "$OUT/c0-$m.txt" --json --quiet > "$OUT/c0-$m.json"
+  $PY -m dmtrack calibrate-from-video $SEQ --start 350 --model $m --out "$OUT/c350-$m.txt" --json --quiet \
+    > "$OUT/c350-$m.json"
+done
+$PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model f-k1 --intrinsics 525,525,320,240 \
+  --out "$OUT/c0-f-k1-525.txt" --json --quiet > "$OUT/c0-f-k1-525.json"
+$PY -m dmtrack calibrate-from-video ../shared/data/tsukuba-150 --model f-k1 --intrinsics 676.5,676.5,320,240 \
+  --out "$OUT/tsu-k1.txt" --json --quiet > "$OUT/tsu-k1.json"
+cp "$OUT"/c*.json "$OUT/tsu-k1.json" $D/selfcal/
+cp "$OUT/c0-f-k1.txt" $D/7scenes-colour-tracks-0-349.txt
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
+  --variant "tracks=--intrinsics=$D/7scenes-colour-tracks-0-349.txt" --off-from $D/held_calibrations.json \
+  --json $D/held_tracks.json
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
+  --variant "tracksw5=--intrinsics=$D/7scenes-colour-tracks-0-349.txt;window.size=5" \
+  --off-from $D/held_calibrations.json --json $D/held_tracks_window.json
+$PY benchmarks/window_ab.py --features gray-affine,rgb,lab --sets $HELD \
+  --variant "tracks=--intrinsics=$D/7scenes-colour-tracks-0-349.txt" --off-from $D/held_c555_more_features.json \
+  --json $D/held_tracks_more_features.json
+for feat in gray bitplanes; do
+  $PY -m dmtrack run $SEQ --feature $feat --intrinsics $D/7scenes-colour-tracks-0-349.txt --out "$OUT/full-$feat" \
+    --no-pointcloud --no-depth-images --no-progress
+done
+$PY $D/table.py

@@ -195,3 +195,23 @@ def test_tsukuba_focal_length_from_10_percent_off(shared_dir, capsys):
 
     res = calibrate_from_video(str(shared_dir / "data" / "tsukuba-150"), intrinsics="676.5,676.5,320,240")
     assert res.converged and abs(res.fx / 615.0 - 1) < 0.02
+
+
+def test_tracks_follow_corners_in_grey_rgb_rgba_and_float_images():
+    """The same corners and positions whatever the image type; each track's camera indices increase by one."""
+    from dmtrack.calibration import track_keyframes
+    from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
+
+    seq = SyntheticSequence(SyntheticConfig(n_frames=12, width=160, height=120, seed=2, colour=True))
+    rgb = [np.asarray(seq[k].image) for k in range(0, 12, 3)]
+    import cv2
+
+    grey = [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in rgb]
+    rgba = [np.dstack([im, np.full(im.shape[:2], 255, np.uint8)]) for im in rgb]
+    a, b, c = track_keyframes(grey), track_keyframes(rgb), track_keyframes(rgba)
+    assert len(a) > 100 and np.array_equal(a.uv, b.uv) and np.array_equal(a.uv, c.uv)
+    d = track_keyframes([g.astype(np.float32) / 255.0 for g in grey])
+    assert len(d) > 100 and set(np.unique(d.camera)) == {0, 1, 2, 3}
+    for p in np.unique(a.point)[:20]:
+        cams = a.camera[a.point == p]
+        assert np.array_equal(cams, np.arange(cams[0], cams[0] + len(cams)))

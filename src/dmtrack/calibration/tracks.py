@@ -24,7 +24,8 @@ __all__ = ["track_keyframes"]
 def _grey_u8(image: np.ndarray) -> np.ndarray:
     img = np.asarray(image)
     if img.ndim == 3:
-        img = img[..., :3].mean(axis=2) if img.dtype != np.uint8 else cv2.cvtColor(img[..., :3], cv2.COLOR_RGB2GRAY)
+        rgb = np.ascontiguousarray(img[..., :3])
+        img = rgb.mean(axis=2) if img.dtype != np.uint8 else cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
     if img.dtype != np.uint8:
         scale = 255.0 if float(np.nanmax(img, initial=0.0)) <= 1.5 else 1.0
         img = np.clip(np.nan_to_num(img * scale), 0, 255).astype(np.uint8)

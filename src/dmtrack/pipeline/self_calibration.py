@@ -5,8 +5,8 @@ Two methods (``method``):
 * ``"tracks"`` (the default): the odometry runs once with the starting guess; corners are tracked over every
   ``step``-th tracked frame and a self-calibrating bundle adjustment (:mod:`dmtrack.calibration`) moves those
   keyframes' poses, the corners' points and the focal length — and with ``model="f-k1"`` the first radial distortion
-  coefficient — together, from the odometry's poses. Where the truth is known it comes back to within about 1 %
-  from 10 % off (docs/window.md); the result does not depend on the start.
+  coefficient — together, from the odometry's poses. On rendered sequences it comes back from 10 % off to within
+  0.1 % (docs/window.md); the result does not depend on the start.
 * ``"window"``: the odometry runs with the sliding window estimating the focal length (and, if asked, the principal
   point) from the photometric residuals of its keyframes (:mod:`dmtrack.window`, ``window.refine_intrinsics``). One
   run's estimate is pulled towards the calibration it was tracked with, so the run is repeated with each estimate

@@ -95,3 +95,30 @@ for feat in gray bitplanes; do
     --no-pointcloud --no-depth-images --no-progress
 done
 $PY $D/table.py
+
+# 6. the same with the tracks refined by an affine warp (the current tracker): calibrations, held-back runs, 0–699
+mkdir -p "$OUT/affine"
+for m in f f-k1; do
+  $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model $m --out "$OUT/affine/c0-$m.txt" --json --quiet \
+    > "$OUT/affine/c0-$m.json"
+  $PY -m dmtrack calibrate-from-video $SEQ --start 350 --model $m --out "$OUT/affine/c350-$m.txt" --json --quiet \
+    > "$OUT/affine/c350-$m.json"
+done
+$PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model f-k1 --intrinsics 525,525,320,240 \
+  --out "$OUT/affine/c0-f-k1-525.txt" --json --quiet > "$OUT/affine/c0-f-k1-525.json"
+$PY -m dmtrack calibrate-from-video ../shared/data/tsukuba-150 --model f-k1 --intrinsics 676.5,676.5,320,240 \
+  --out "$OUT/affine/tsu-k1.txt" --json --quiet > "$OUT/affine/tsu-k1.json"
+cp "$OUT"/affine/*.json $D/selfcal-affine/
+cp "$OUT/affine/c0-f-k1.txt" $D/7scenes-colour-tracks-affine-0-349.txt
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
+  --variant "affine=--intrinsics=$D/7scenes-colour-tracks-affine-0-349.txt" \
+  --variant "affinew5=--intrinsics=$D/7scenes-colour-tracks-affine-0-349.txt;window.size=5" \
+  --off-from $D/held_calibrations.json --json $D/held_tracks_affine.json
+$PY benchmarks/window_ab.py --features gray-affine,rgb,lab --sets $HELD \
+  --variant "affine=--intrinsics=$D/7scenes-colour-tracks-affine-0-349.txt" \
+  --off-from $D/held_c555_more_features.json --json $D/held_tracks_affine_more_features.json
+for feat in gray bitplanes; do
+  $PY -m dmtrack run $SEQ --feature $feat --intrinsics $D/7scenes-colour-tracks-affine-0-349.txt \
+    --out "$OUT/fullA-$feat" --no-pointcloud --no-depth-images --no-progress
+done
+$PY $D/table.py

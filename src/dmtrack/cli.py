@@ -536,7 +536,7 @@ def _add_self_calibration_parser(subparsers: argparse._SubParsersAction) -> None
              "bundle adjustment of corner tracks on the odometry's poses, or the sliding window; docs/window.md)",
     )  # fmt: skip
     p.add_argument("sequence", metavar="SEQUENCE", help="video file, image folder or dataset")
-    p.add_argument("--out", required=True, metavar="FILE", help="intrinsics file to write (fx fy cx cy)")
+    p.add_argument("--out", required=True, metavar="FILE", help="file to write (fx fy cx cy; f-k1: DSO RadTan)")
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY|FILE",
                    help="starting guess (default: the sequence's own, else fx = fy = 0.8 × width at the centre)")
     p.add_argument("--feature", default="gray", help="feature tracked with (default gray)")

@@ -238,3 +238,14 @@ def test_tracks_follow_corners_in_grey_rgb_rgba_and_float_images():
     for p in np.unique(a.point)[:20]:
         cams = a.camera[a.point == p]
         assert np.array_equal(cams, np.arange(cams[0], cams[0] + len(cams)))
+
+
+def test_a_calibration_file_is_used_as_it_is(tmp_path):
+    """Started from a DSO-format file (which ``--intrinsics`` reads), the odometry and the tracks see the same images
+    with the same camera: the rendered focal length comes back."""
+    from dmtrack.pipeline.self_calibration import calibrate_from_video
+
+    calib = tmp_path / "camera.txt"
+    calib.write_text("RadTan 280 280 159.5 119.5 0 0 0 0\n320 240\nnone\n320 240\n")
+    res = calibrate_from_video("synthetic:n_frames=60,width=320,height=240,seed=1", intrinsics=str(calib))
+    assert res.method == "tracks" and abs(res.fx / 262.5 - 1) < 0.005

@@ -252,7 +252,7 @@ class SequenceRun:
                 starting.result()
         self.startup.update(warmup_s=self.compile_s if warmup else None, start_s=time.perf_counter() - self.t_start)
         release_free_memory()  # what the warm-up and the start freed (their frames, maps, threads' heaps)
-        release_idle_library_pages()  # what the start read back: the run does not use LLVM any more
+        release_idle_library_pages()  # what the start read back (a kernel loaded later reads back what it needs)
         for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in self.configs) if r):  # in metrics
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
         self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink,

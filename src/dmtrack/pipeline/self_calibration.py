@@ -10,12 +10,13 @@ Two methods (``method``):
 * ``"window"``: the odometry runs with the sliding window estimating the focal length (and, if asked, the principal
   point) from the photometric residuals of its keyframes (:mod:`dmtrack.window`, ``window.refine_intrinsics``). One
   run's estimate is pulled towards the calibration it was tracked with, so the run is repeated with each estimate
-  until it changes by less than ``tolerance`` (a fixed point). Where the motion shows little of the focal length
-  the fixed point is wherever it started (rendered sequences).
+  until it changes by less than ``tolerance`` (a fixed point). On rendered sequences it barely moves from where it
+  started (docs/window.md).
 
 The result is written as the ``fx fy cx cy`` file that ``dmtrack run --intrinsics FILE`` reads, or, with k1, as a
 4-line ``RadTan`` calibration file (DSO's format, which ``--intrinsics`` also reads: the frames are undistorted).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -102,7 +103,8 @@ def calibrate_from_video(
         The feature tracked with (grey by default).
     intrinsics
         The starting guess ``"fx,fy,cx,cy"`` or a file; None: the sequence's own, or, if it has none, a focal length
-        of 0.8 × the width (a field of view of about 64°, a phone's) and the image centre.
+        of 0.8 × the width (a field of view of about 64°, a phone's) and the image centre. With a file that
+        undistorts (DSO's format), the tracks method estimates the camera of the undistorted images.
     model
         ``"tracks"``: ``"f"`` (one focal length, the principal point kept) or ``"f-k1"`` (also k1). ``"window"``:
         ``"f"``, ``"f-c"`` or ``"fxfy-c"`` (``WindowConfig``).
@@ -137,8 +139,9 @@ def calibrate_from_video(
         K = [0.8 * width, 0.8 * width, (width - 1) / 2.0, (height - 1) / 2.0]
     base = config or VOConfig()
     if method == "tracks":
-        return _calibrate_tracks(seq, str(sequence), feature, K, (width, height), model, step, start, max_frames,
-                                 base, on_iteration)  # fmt: skip
+        given = intrinsics or ",".join(f"{v:.6f}" for v in K)  # a calibration file as it is (it may undistort)
+        return _calibrate_tracks(seq, str(sequence), feature, given, K, (width, height), model, step, start,
+                                 max_frames, base, on_iteration)  # fmt: skip
     if method != "window":
         raise InputError(f"calibrate-from-video: method must be 'tracks' or 'window', not {method!r}")
     cfg = dataclasses.replace(base, window=dataclasses.replace(base.window, size=window, refine_intrinsics=True,
@@ -180,10 +183,11 @@ def _size(seq: Any) -> tuple[int, int]:
 
 
 def _calibrate_tracks(
-    seq: Any, source: str, feature: str, K: list[float], size: tuple[int, int], model: str, step: int, start: int,
-    max_frames: int | None, config: VOConfig, on_iteration: Callable[[dict[str, Any]], None] | None,
+    seq: Any, source: str, feature: str, given: str, K: list[float], size: tuple[int, int], model: str, step: int,
+    start: int, max_frames: int | None, config: VOConfig, on_iteration: Callable[[dict[str, Any]], None] | None,
 ) -> SelfCalibration:  # fmt: skip
-    """The ``"tracks"`` method: the odometry's poses once, then :func:`dmtrack.calibration.self_calibrate`."""
+    """The ``"tracks"`` method: the odometry's poses once (on ``seq``'s images, with the calibration ``given``, whose
+    pinhole part is ``K``), then :func:`dmtrack.calibration.self_calibrate` on the same images."""
     import numpy as np
 
     from dmtrack.calibration import MODELS, self_calibrate, track_keyframes
@@ -193,14 +197,13 @@ def _calibrate_tracks(
         raise InputError(f"calibrate-from-video: the tracks method estimates {' or '.join(MODELS)}, not {model!r}")
     if step < 1:
         raise InputError(f"calibrate-from-video: step must be at least 1, not {step}")
-    guess = ",".join(f"{v:.6f}" for v in K)
     result = track(source, feature, dataclasses.replace(config, window=dataclasses.replace(config.window, size=0)),
-                   start=start, max_frames=max_frames, intrinsics=guess)  # fmt: skip
+                   start=start, max_frames=max_frames, intrinsics=given)  # fmt: skip
     frames = np.asarray(result.frame_indices)[::step]
     poses = np.asarray(result.trajectory.poses)[::step]
     if len(frames) < 3:
         raise InputError(f"{source}: the odometry tracked {result.tracked_frames} of {result.total_frames} frames, "
-                         f"too few for {3} keyframes {step} frames apart")  # fmt: skip
+                         f"too few for 3 keyframes {step} frames apart")  # fmt: skip
     obs = track_keyframes(seq[int(i)].image for i in frames)
     R = np.swapaxes(poses[:, :3, :3], 1, 2)  # camera from world
     t = -np.einsum("nij,nj->ni", R, poses[:, :3, 3])

@@ -122,3 +122,13 @@ for feat in gray bitplanes; do
     --out "$OUT/fullA-$feat" --no-pointcloud --no-depth-images --no-progress
 done
 $PY $D/table.py
+
+# 7. a start that waits for more parallax: chosen on starts 25, 75, …, 475, then the held-back runs
+for p in 0.5 1.0 1.5; do
+  for s in 25 75 125 175 225 275 325 375 425 475; do
+    $PY -m dmtrack run $SEQ --start $s --max-frames 160 --set initializer.min_parallax_deg=$p --out "$OUT/par/s${s}_p$p" \
+      --no-pointcloud --no-depth-images --no-progress
+  done
+done
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets held --variant "p10=initializer.min_parallax_deg=1.0" \
+  --off-from benchmarks/studies/2026-11-28-window/held.json --json $D/held_parallax.json

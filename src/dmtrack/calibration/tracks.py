@@ -96,7 +96,7 @@ def track_keyframes(
     ``camera`` is the index in ``images``, ``point`` the track."""
     lk = {"winSize": (int(window), int(window)), "maxLevel": int(levels),
           "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}  # fmt: skip
-    greys: list[np.ndarray] = []
+    greys: list[np.ndarray | None] = []  # a keyframe's image while a live track started on it (and the newest)
     pts = np.zeros((0, 2), np.float32)
     ids = np.zeros(0, np.int64)
     first_pts = np.zeros((0, 2), np.float32)
@@ -106,13 +106,14 @@ def track_keyframes(
     out_c: list[np.ndarray] = []
     out_uv: list[np.ndarray] = []
     next_id = 0
+    previous = np.zeros((0, 0), np.uint8)
     for k, image in enumerate(images):
         grey = _grey_u8(image)
         greys.append(grey)
         h, w = grey.shape
         if k > 0 and len(pts):
-            nxt, st, _ = cv2.calcOpticalFlowPyrLK(greys[k - 1], grey, pts, None, **lk)
-            back, st_back, _ = cv2.calcOpticalFlowPyrLK(grey, greys[k - 1], nxt, None, **lk)
+            nxt, st, _ = cv2.calcOpticalFlowPyrLK(previous, grey, pts, None, **lk)
+            back, st_back, _ = cv2.calcOpticalFlowPyrLK(grey, previous, nxt, None, **lk)
             ok = (st[:, 0] == 1) & (st_back[:, 0] == 1) & (np.linalg.norm(back - pts, axis=1) < max_fb_error)
             refined = nxt.astype(np.float64)
             new_warps = warps.copy()
@@ -142,9 +143,12 @@ def track_keyframes(
                 first_pts = np.vstack([first_pts, new])
                 first_k = np.r_[first_k, np.full(len(new), k)]
                 warps = np.concatenate([warps, np.tile(np.eye(2), (len(new), 1, 1))])
+        for i in set(range(k)) - set(first_k.tolist()):
+            greys[i] = None  # no live track starts there: not read again
         out_p.append(ids.copy())
         out_c.append(np.full(len(ids), k, np.int64))
         out_uv.append(pts.astype(np.float64))
+        previous = grey
     if not out_p:
         return Observations(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
     return Observations(np.concatenate(out_p), np.concatenate(out_c), np.concatenate(out_uv))

@@ -18,21 +18,11 @@ import cv2
 import numpy as np
 
 from dmtrack.calibration.bundle import Observations
+from dmtrack.initialization.tracks import grey_u8
 
 __all__ = ["refine_affine", "track_keyframes"]
 
 _HALF = 10  # the refinement's patch: (2·10 + 1)² pixels
-
-
-def _grey_u8(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
-    if img.ndim == 3:
-        rgb = np.ascontiguousarray(img[..., :3])
-        img = rgb.mean(axis=2) if img.dtype != np.uint8 else cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-    if img.dtype != np.uint8:
-        scale = 255.0 if float(np.nanmax(img, initial=0.0)) <= 1.5 else 1.0
-        img = np.clip(np.nan_to_num(img * scale), 0, 255).astype(np.uint8)
-    return np.ascontiguousarray(img)
 
 
 def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -108,7 +98,7 @@ def track_keyframes(
     next_id = 0
     previous = np.zeros((0, 0), np.uint8)
     for k, image in enumerate(images):
-        grey = _grey_u8(image)
+        grey = grey_u8(image)
         greys.append(grey)
         h, w = grey.shape
         if k > 0 and len(pts):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["CornerTracks", "grid_coverage"]
+__all__ = ["CornerTracks", "grey_u8", "grid_coverage"]
 
 
 def grid_coverage(points: np.ndarray, width: int, height: int, cells: int = 3, per_cell: int = 3) -> float:
@@ -70,7 +70,7 @@ class CornerTracks:
         levels: int = 3,
         max_fb_error: float = 0.5,
     ) -> None:
-        grey = _grey_u8(image)
+        grey = grey_u8(image)
         self._corners, self._min_distance = int(corners), float(min_distance)
         self.first = _detect(grey, self._corners, self._min_distance, None)
         self.alive = np.ones(len(self.first), bool)
@@ -106,7 +106,7 @@ class CornerTracks:
 
     def add(self, image: np.ndarray) -> int:
         """Follow the live tracks into the next frame; return how many are still alive."""
-        grey = _grey_u8(image)
+        grey = grey_u8(image)
         idx = np.flatnonzero(self.alive)
         obs = np.full_like(self.first, np.nan)
         if len(idx):
@@ -163,11 +163,15 @@ def _detect(grey: np.ndarray, corners: int, min_distance: float, mask: np.ndarra
     return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2).astype(np.float32)
 
 
-def _grey_u8(image: np.ndarray) -> np.ndarray:
-    """A contiguous uint8 grey image (RGB is converted as the grey feature does)."""
+def grey_u8(image: np.ndarray) -> np.ndarray:
+    """A contiguous uint8 grey image for OpenCV's corner detector and KLT: RGB (an alpha channel ignored) is
+    converted as the grey feature does; a float image is rounded, after scaling by 255 when it is on a 0–1 scale
+    (its largest value at most 1.5). A sequence's uint8 frames go through unchanged in value."""
     a = np.asarray(image)
     if a.ndim == 3:
-        a = cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2GRAY)
+        rgb = np.ascontiguousarray(a[..., :3])
+        a = cv2.cvtColor(rgb if rgb.dtype == np.uint8 else rgb.astype(np.float32), cv2.COLOR_RGB2GRAY)
     if a.dtype != np.uint8:
-        a = np.clip(np.rint(a), 0, 255).astype(np.uint8)
+        scale = 255.0 if float(np.nanmax(a, initial=0.0)) <= 1.5 else 1.0
+        a = np.clip(np.rint(np.nan_to_num(a * scale)), 0, 255).astype(np.uint8)
     return np.ascontiguousarray(a)

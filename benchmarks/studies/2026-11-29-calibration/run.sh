@@ -69,16 +69,24 @@ $PY $D/translation_anatomy.py $H/p{50,100,150,200,250,300,350,400,450,500,full} 
 $PY $D/translation_anatomy.py $H/c{50,100,150,200,250,300,350,400,450,500,full} --json $D/translation_c555.json
 $PY $D/translation_anatomy.py $H/r200_{0,1,2,3,4} $H/p200 --json $D/translation_start200.json
 
-# 5. the calibration from corner tracks (dmtrack calibrate-from-video, its tracks method), chosen on 0–349 only
-for m in f f-k1; do
-  $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model $m --out "$OUT/c0-$m.txt" --json --quiet > "$OUT/c0-$m.json"
-  $PY -m dmtrack calibrate-from-video $SEQ --start 350 --model $m --out "$OUT/c350-$m.txt" --json --quiet \
-    > "$OUT/c350-$m.json"
-done
-$PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model f-k1 --intrinsics 525,525,320,240 \
-  --out "$OUT/c0-f-k1-525.txt" --json --quiet > "$OUT/c0-f-k1-525.json"
-$PY -m dmtrack calibrate-from-video ../shared/data/tsukuba-150 --model f-k1 --intrinsics 676.5,676.5,320,240 \
-  --out "$OUT/tsu-k1.txt" --json --quiet > "$OUT/tsu-k1.json"
+# 5. the calibration from corner tracks (dmtrack calibrate-from-video, its tracks method), chosen on 0–349 only.
+#    Sections 5 and 6 run the same calibrations; section 5's files (selfcal/, the *-tracks-0-349.txt file and the
+#    held_tracks*.json runs) came from the first tracker (KLT refinement, commit 47590dc): today's code gives
+#    section 6's, so section 5 reproduces them only at that commit.
+calibrations() {  # DIR: 7-Scenes 0–349 and 350–699 (f, f-k1), 0–349 from 525 (f-k1), Tsukuba (f-k1); JSON and files
+  mkdir -p "$1"
+  for m in f f-k1; do
+    $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model $m --out "$1/c0-$m.txt" --json --quiet \
+      > "$1/c0-$m.json"
+    $PY -m dmtrack calibrate-from-video $SEQ --start 350 --model $m --out "$1/c350-$m.txt" --json --quiet \
+      > "$1/c350-$m.json"
+  done
+  $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model f-k1 --intrinsics 525,525,320,240 \
+    --out "$1/c0-f-k1-525.txt" --json --quiet > "$1/c0-f-k1-525.json"
+  $PY -m dmtrack calibrate-from-video ../shared/data/tsukuba-150 --model f-k1 --intrinsics 676.5,676.5,320,240 \
+    --out "$1/tsu-k1.txt" --json --quiet > "$1/tsu-k1.json"
+}
+calibrations "$OUT"
 cp "$OUT"/c*.json "$OUT/tsu-k1.json" $D/selfcal/
 cp "$OUT/c0-f-k1.txt" $D/7scenes-colour-tracks-0-349.txt
 $PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \
@@ -97,17 +105,7 @@ done
 $PY $D/table.py
 
 # 6. the same with the tracks refined by an affine warp (the current tracker): calibrations, held-back runs, 0–699
-mkdir -p "$OUT/affine"
-for m in f f-k1; do
-  $PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model $m --out "$OUT/affine/c0-$m.txt" --json --quiet \
-    > "$OUT/affine/c0-$m.json"
-  $PY -m dmtrack calibrate-from-video $SEQ --start 350 --model $m --out "$OUT/affine/c350-$m.txt" --json --quiet \
-    > "$OUT/affine/c350-$m.json"
-done
-$PY -m dmtrack calibrate-from-video $SEQ --max-frames 350 --model f-k1 --intrinsics 525,525,320,240 \
-  --out "$OUT/affine/c0-f-k1-525.txt" --json --quiet > "$OUT/affine/c0-f-k1-525.json"
-$PY -m dmtrack calibrate-from-video ../shared/data/tsukuba-150 --model f-k1 --intrinsics 676.5,676.5,320,240 \
-  --out "$OUT/affine/tsu-k1.txt" --json --quiet > "$OUT/affine/tsu-k1.json"
+calibrations "$OUT/affine"
 cp "$OUT"/affine/*.json $D/selfcal-affine/
 cp "$OUT/affine/c0-f-k1.txt" $D/7scenes-colour-tracks-affine-0-349.txt
 $PY benchmarks/window_ab.py --features gray,bitplanes --sets $HELD \

@@ -532,19 +532,18 @@ def _add_self_calibration_parser(subparsers: argparse._SubParsersAction) -> None
     """``calibrate-from-video`` (its command: :mod:`dmtrack.pipeline.cli_self_calibration`, imported when it runs)."""
     p = subparsers.add_parser(
         "calibrate-from-video",
-        help="estimate the camera's intrinsics from a sequence's own images, without a board (a self-calibrating "
-             "bundle adjustment of corner tracks on the odometry's poses, or the sliding window; docs/window.md)",
-    )  # fmt: skip
+        help="estimate the camera's intrinsics from a sequence's own images, without a board (docs/window.md)")
     p.add_argument("sequence", metavar="SEQUENCE", help="video file, image folder or dataset")
     p.add_argument("--out", required=True, metavar="FILE", help="file to write (fx fy cx cy; f-k1: DSO RadTan)")
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY|FILE",
                    help="starting guess (default: the sequence's own, else fx = fy = 0.8 × width at the centre)")
     p.add_argument("--feature", default="gray", help="feature tracked with (default gray)")
-    p.add_argument("--method", choices=("tracks", "window"), default="tracks", help="corner tracks (default) or window")
+    p.add_argument("--method", choices=("tracks", "groundtruth", "window"), default="tracks",
+                   help="corner tracks on the odometry's poses (default), on the dataset's ground truth, or the window")
     p.add_argument("--model", choices=("f", "f-k1", "f-c", "fxfy-c"), default="f",
                    help="what is estimated: one focal length (default; the principal point kept, as COLMAP); "
-                        "tracks: also k1 (f-k1: a RadTan file); window: also the principal point, or fx, fy, cx, cy")
-    p.add_argument("--step", type=int, default=5, metavar="N", help="tracks: every N-th frame is a keyframe")
+                        "f-k1: also k1 (a RadTan file; not the window); f-c, fxfy-c (window): also cx, cy, or fx, fy")
+    p.add_argument("--step", type=int, default=5, metavar="N", help="tracks, groundtruth: every N-th frame is used")
     p.add_argument("--start", type=int, default=0, metavar="N", help="first frame")
     p.add_argument("--max-frames", type=int, metavar="N", help="use at most N frames")
     p.add_argument("--iterations", type=int, default=6, metavar="N", help="window: at most N runs (default 6)")

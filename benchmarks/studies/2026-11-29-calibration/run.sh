@@ -130,3 +130,33 @@ for p in 0.5 1.0 1.5; do
 done
 $PY benchmarks/window_ab.py --features gray,bitplanes --sets held --variant "p10=initializer.min_parallax_deg=1.0" \
   --off-from benchmarks/studies/2026-11-28-window/held.json --json $D/held_parallax.json
+
+# 8. the focal length the datasets' own ground-truth poses and the images agree on (calibrate-from-video --method
+#    groundtruth: the poses fixed, only the corners' points and f, or f and k1, adjusted); each half on its own
+TSU=../shared/data/tsukuba-150
+mkdir -p "$OUT"
+gt() {  # name, then calibrate-from-video's arguments
+  local name=$1; shift
+  $PY -m dmtrack calibrate-from-video "$@" --method groundtruth --out "$OUT/gt-$name.txt" --json --quiet \
+    > "$OUT/gt-$name.json" || true
+}
+gt tsukuba "$TSU"
+gt tsukuba-c320 "$TSU" --intrinsics 615,615,320,240
+gt tsukuba-0-74 "$TSU" --max-frames 75
+gt tsukuba-75-149 "$TSU" --start 75
+for s in 0 350; do
+  gt 7scenes-$s-f $SEQ --start $s --max-frames 350
+  gt 7scenes-$s-f-k1 $SEQ --start $s --max-frames 350 --model f-k1
+done
+$PY - "$OUT" > $D/groundtruth_focal.json <<'PYEOF'
+import json, sys
+from pathlib import Path
+out = {}
+for p in sorted(Path(sys.argv[1]).glob("gt-*.json")):
+    d = json.loads(p.read_text())
+    last = d["history"][-1]
+    out[p.stem[3:]] = {"f": round(d["fx"], 2), "k1": round(d["k1"], 4), "sigma": d["sigma"], "cx": d["cx"],
+                       "cy": d["cy"], "converged": d["converged"], "median_error_px": round(last["median_error_px"], 3),
+                       "corners": last["points"], "frames_used": last["keyframes"]}
+print(json.dumps(out, indent=1))
+PYEOF

@@ -135,9 +135,11 @@ def triangulate(R: np.ndarray, t: np.ndarray, f: float, cx: float, cy: float, ob
 class _Problem:
     """One adjustment: the state, its residuals and the Levenberg–Marquardt steps (see the module docstring)."""
 
-    def __init__(self, R, t, X, f, k1, cx, cy, obs: Observations, with_k1: bool) -> None:  # noqa: ANN001
+    def __init__(self, R, t, X, f, k1, cx, cy, obs: Observations, with_k1: bool,  # noqa: ANN001
+                 fixed_poses: bool = False) -> None:  # fmt: skip
         self.R, self.t, self.X, self.f, self.k1 = R, t, X, float(f), float(k1)
         self.cx, self.cy, self.obs, self.with_k1 = float(cx), float(cy), obs, with_k1
+        self.fixed_poses = fixed_poses
         self.nI = 2 if with_k1 else 1
         self.G = self.nI + 6 * len(R)
         order = np.argsort(obs.point, kind="stable")
@@ -186,7 +188,10 @@ class _Problem:
         return S, s, idx, B, Ci, c
 
     def free(self) -> np.ndarray:
-        """The unknowns of the reduced system that move: the intrinsics and every pose but the first."""
+        """The unknowns of the reduced system that move: the intrinsics and every pose but the first (only the
+        intrinsics when the poses are fixed)."""
+        if self.fixed_poses:
+            return np.arange(self.nI)
         return np.r_[np.arange(self.nI), np.arange(self.nI + 6, self.G)]
 
     def step(self, lam: float) -> tuple[bool, float]:
@@ -253,13 +258,16 @@ def self_calibrate(
     reject: float = 2.0,
     min_views: int = 3,
     iterations: int = 100,
+    fixed_poses: bool = False,
 ) -> BundleCalibration:
     """Adjust keyframe poses (camera from world ``R`` (k, 3, 3), ``t`` (k, 3): a first guess, e.g. the odometry's),
     corner points (triangulated here) and the intrinsics to the observations ``obs`` (see the module docstring).
 
     ``f`` is the starting focal length, ``cx``, ``cy`` the principal point (kept); ``model`` one of :data:`MODELS`;
     at most ``passes`` adjustments, each after dropping the tracks whose RMS error is above ``reject`` × the median;
-    points seen in fewer than ``min_views`` keyframes are not used.
+    points seen in fewer than ``min_views`` keyframes are not used. With ``fixed_poses`` the poses are known (a
+    dataset's ground truth, any scale) and only the points and the intrinsics move: the intrinsics that those poses
+    and the images agree on.
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, not {model!r}")
@@ -283,7 +291,7 @@ def self_calibrate(
         cur, used = sub.subset(keep_obs)
         if len(cur) == 0:
             raise ValueError("every corner was rejected: nothing to adjust")
-        problem = _Problem(R, t, X[used], f, k1, cx, cy, cur, model == "f-k1")
+        problem = _Problem(R, t, X[used], f, k1, cx, cy, cur, model == "f-k1", fixed_poses)
         converged = problem.solve(iterations)
         R, t, f, k1 = problem.R, problem.t, problem.f, problem.k1
         X = X.copy()

@@ -13,15 +13,17 @@ def cmd_calibrate_from_video(args: argparse.Namespace) -> int:
     from dmtrack.pipeline.self_calibration import calibrate_from_video, write_intrinsics
 
     method = getattr(args, "method", "window")
-    if method == "tracks" and args.model not in ("f", "f-k1"):
-        raise InputError(f"--model {args.model}: the tracks method estimates f or f-k1 (--method window for the rest)")
+    adjusts = method in ("tracks", "groundtruth")  # the corner tracks' bundle adjustment
+    if adjusts and args.model not in ("f", "f-k1"):
+        raise InputError(f"--model {args.model}: the {method} method estimates f or f-k1 (--method window for the "
+                         "rest)")  # fmt: skip
     if method == "window" and args.model == "f-k1":
         raise InputError("--model f-k1: only the tracks method estimates k1")
 
     def show(rec: dict) -> None:
         if args.quiet:
             return
-        if method == "tracks":
+        if adjusts:
             print(f"pass {rec['pass']}: f={rec['f']:.2f}" + (f" k1={rec['k1']:+.4f}" if args.model == "f-k1" else "")
                   + f", median error {rec['median_error_px']:.3f} px over {rec['observations']} observations of "
                   f"{rec['points']} corners in {rec['keyframes']} keyframes", file=sys.stderr)  # fmt: skip
@@ -39,11 +41,12 @@ def cmd_calibrate_from_video(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({**calib.to_dict(), "intrinsics_file": str(path)}, indent=2))
         return 0 if calib.converged else 3
-    if method == "tracks":
+    if adjusts:
         state = "converged" if calib.converged else "NOT converged"
         print(f"fx=fy={calib.fx:.2f} (σ {calib.sigma['fx']:.2f} px, from independent pixel errors: a lower bound)"
               + (f" k1={calib.k1:+.5f} (σ {calib.sigma['k1']:.5f})" if calib.model == "f-k1" else "")
-              + f" cx={calib.cx:.2f} cy={calib.cy:.2f} (kept); {state} after {len(calib.history)} passes")
+              + f" cx={calib.cx:.2f} cy={calib.cy:.2f} (kept); {state} after {len(calib.history)} passes"
+              + ("; the poses: the ground truth's" if method == "groundtruth" else ""))
     else:
         state = "converged" if calib.converged else f"not converged after {len(calib.history)} runs"
         sig = calib.sigma.get("fx")

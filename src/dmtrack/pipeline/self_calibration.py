@@ -7,6 +7,9 @@ Two methods (``method``):
   keyframes' poses, the corners' points and the focal length — and with ``model="f-k1"`` the first radial distortion
   coefficient — together, from the odometry's poses. On rendered sequences it comes back from 10 % off to within
   0.1 % (docs/window.md); the result does not depend on the start.
+* ``"groundtruth"``: the same adjustment with the keyframes' poses fixed at the sequence's ground truth (any scale):
+  only the points and the intrinsics move. It tells the focal length that a dataset's own poses and images agree on
+  — a check of the calibration a dataset documents (on Tsukuba, 622 px where 615 is documented; docs/window.md).
 * ``"window"``: the odometry runs with the sliding window estimating the focal length (and, if asked, the principal
   point) from the photometric residuals of its keyframes (:mod:`dmtrack.window`, ``window.refine_intrinsics``). One
   run's estimate is pulled towards the calibration it was tracked with, so the run is repeated with each estimate
@@ -66,9 +69,10 @@ def write_intrinsics(calib: SelfCalibration, path: str | Path, source: str) -> P
                 f"{calib.width} {calib.height}\ncrop\n{calib.width} {calib.height}\n")  # fmt: skip
         write_text(p, text)
         return p
-    how = ("self-calibrating bundle adjustment of corner tracks" if calib.method == "tracks"
-           else "sliding-window photometric bundle adjustment")  # fmt: skip
-    runs = f"{len(calib.history)} passes" if calib.method == "tracks" else f"{len(calib.history)} runs"
+    how = {"tracks": "self-calibrating bundle adjustment of corner tracks",
+           "groundtruth": "bundle adjustment of corner tracks on the ground-truth poses"}.get(
+        calib.method, "sliding-window photometric bundle adjustment")  # fmt: skip
+    runs = f"{len(calib.history)} {'runs' if calib.method == 'window' else 'passes'}"
     text = (f"# dmtrack calibrate-from-video {source}: pinhole intrinsics of the {calib.width}x{calib.height} images\n"
             f"# estimated from the images ({how}), "
             f"{'converged' if calib.converged else 'NOT converged'} after {runs}\n"
@@ -109,9 +113,10 @@ def calibrate_from_video(
         ``"tracks"``: ``"f"`` (one focal length, the principal point kept) or ``"f-k1"`` (also k1). ``"window"``:
         ``"f"``, ``"f-c"`` or ``"fxfy-c"`` (``WindowConfig``).
     method
-        ``"tracks"`` or ``"window"`` (see the module docstring).
+        ``"tracks"``, ``"groundtruth"`` or ``"window"`` (see the module docstring).
     step
-        ``"tracks"``: every ``step``-th tracked frame is a keyframe of the adjustment.
+        ``"tracks"``: every ``step``-th tracked frame is a keyframe of the adjustment; ``"groundtruth"``: every
+        ``step``-th frame with a ground-truth pose.
     start, max_frames
         The frames used.
     iterations, tolerance
@@ -126,7 +131,8 @@ def calibrate_from_video(
     Raises
     ------
     InputError
-        If the sequence cannot be read or the odometry could not estimate anything (no keyframe change).
+        If the sequence cannot be read, the odometry could not estimate anything (no keyframe change), or, with
+        ``"groundtruth"``, the sequence has too few ground-truth poses.
     """
     from dmtrack.datasets import open_sequence
     from dmtrack.pipeline import track
@@ -142,8 +148,11 @@ def calibrate_from_video(
         given = intrinsics or ",".join(f"{v:.6f}" for v in K)  # a calibration file as it is (it may undistort)
         return _calibrate_tracks(seq, str(sequence), feature, given, K, (width, height), model, step, start,
                                  max_frames, base, on_iteration)  # fmt: skip
+    if method == "groundtruth":
+        return _calibrate_groundtruth(seq, str(sequence), K, (width, height), model, step, start, max_frames,
+                                      on_iteration)  # fmt: skip
     if method != "window":
-        raise InputError(f"calibrate-from-video: method must be 'tracks' or 'window', not {method!r}")
+        raise InputError(f"calibrate-from-video: method must be 'tracks', 'groundtruth' or 'window', not {method!r}")
     cfg = dataclasses.replace(base, window=dataclasses.replace(base.window, size=window, refine_intrinsics=True,
                                                                intrinsics_model=model))  # fmt: skip
     history: list[dict[str, Any]] = []
@@ -190,7 +199,7 @@ def _calibrate_tracks(
     pinhole part is ``K``), then :func:`dmtrack.calibration.self_calibrate` on the same images."""
     import numpy as np
 
-    from dmtrack.calibration import MODELS, self_calibrate, track_keyframes
+    from dmtrack.calibration import MODELS
     from dmtrack.pipeline import track
 
     if model not in MODELS:
@@ -204,15 +213,64 @@ def _calibrate_tracks(
     if len(frames) < 3:
         raise InputError(f"{source}: the odometry tracked {result.tracked_frames} of {result.total_frames} frames, "
                          f"too few for 3 keyframes {step} frames apart")  # fmt: skip
+    extra = {"tracked_frames": result.tracked_frames, "total_frames": result.total_frames}
+    return _adjust(seq, source, frames, poses, K, size, model, on_iteration, extra)
+
+
+def _calibrate_groundtruth(
+    seq: Any, source: str, K: list[float], size: tuple[int, int], model: str, step: int, start: int,
+    max_frames: int | None, on_iteration: Callable[[dict[str, Any]], None] | None,
+) -> SelfCalibration:  # fmt: skip
+    """The ``"groundtruth"`` method: every ``step``-th frame of ``start …`` that has a ground-truth pose (timed within
+    1 µs), those poses fixed, :func:`dmtrack.calibration.self_calibrate` on the points and the intrinsics."""
+    import numpy as np
+
+    from dmtrack.calibration import MODELS
+
+    if model not in MODELS:
+        raise InputError(f"calibrate-from-video: the groundtruth method estimates {' or '.join(MODELS)}, not "
+                         f"{model!r}")  # fmt: skip
+    if step < 1:
+        raise InputError(f"calibrate-from-video: step must be at least 1, not {step}")
+    gt = seq.groundtruth
+    if gt is None or len(gt) == 0:
+        raise InputError(f"{source}: no ground-truth poses, which the groundtruth method needs (--method tracks "
+                         "estimates the intrinsics from the images alone)")  # fmt: skip
+    stop = len(seq) if max_frames is None else min(len(seq), start + max_frames)
+    times = np.asarray(seq.timestamps, np.float64)
+    gt_times = np.asarray(gt.timestamps, np.float64)
+    frames, poses = [], []
+    for i in range(start, stop):
+        j = int(np.argmin(np.abs(gt_times - times[i])))
+        if abs(gt_times[j] - times[i]) <= 1e-6:
+            frames.append(i)
+            poses.append(gt.poses[j])
+    frames, poses = frames[::step], poses[::step]
+    if len(frames) < 3:
+        raise InputError(f"{source}: {len(frames)} frames {step} apart with a ground-truth pose in frames {start}–"
+                         f"{stop - 1}; the groundtruth method needs 3")  # fmt: skip
+    extra = {"groundtruth_frames": len(frames)}
+    return _adjust(seq, source, np.asarray(frames), np.asarray(poses), K, size, model, on_iteration, extra,
+                   fixed_poses=True)  # fmt: skip
+
+
+def _adjust(
+    seq: Any, source: str, frames: Any, poses: Any, K: list[float], size: tuple[int, int], model: str,
+    on_iteration: Callable[[dict[str, Any]], None] | None, extra: dict[str, Any], fixed_poses: bool = False,
+) -> SelfCalibration:  # fmt: skip
+    """Corner tracks over ``frames`` (camera-to-world ``poses``: the first guess, or fixed) and the adjustment."""
+    import numpy as np
+
+    from dmtrack.calibration import self_calibrate, track_keyframes
+
     obs = track_keyframes(seq[int(i)].image for i in frames)
     R = np.swapaxes(poses[:, :3, :3], 1, 2)  # camera from world
     t = -np.einsum("nij,nj->ni", R, poses[:, :3, 3])
     try:
-        bundle = self_calibrate(R, t, obs, K[0], K[2], K[3], model=model)
+        bundle = self_calibrate(R, t, obs, K[0], K[2], K[3], model=model, fixed_poses=fixed_poses)
     except ValueError as e:
         raise InputError(f"{source}: {e} ({len(frames)} keyframes, {len(obs)} corner observations)") from None
-    history = [{**rec, "iteration": rec["pass"], "start": K, "keyframes": len(frames),
-                "tracked_frames": result.tracked_frames, "total_frames": result.total_frames}
+    history = [{**rec, "iteration": rec["pass"], "start": K, "keyframes": len(frames), **extra}
                for rec in bundle.passes]  # fmt: skip
     for rec in history:
         if on_iteration is not None:
@@ -221,4 +279,4 @@ def _calibrate_tracks(
     if bundle.sigma_k1 is not None:
         sigma["k1"] = bundle.sigma_k1
     return SelfCalibration(bundle.f, bundle.f, K[2], K[3], sigma, bundle.converged, size[0], size[1], history,
-                           k1=bundle.k1, method="tracks", model=model)  # fmt: skip
+                           k1=bundle.k1, method="groundtruth" if fixed_poses else "tracks", model=model)  # fmt: skip

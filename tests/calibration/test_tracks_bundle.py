@@ -205,11 +205,30 @@ def test_calibrate_from_video_with_k1_writes_a_radtan_file_that_run_reads(tmp_pa
     syn = "synthetic:n_frames=60,width=320,height=240,seed=1"
     assert main(["calibrate-from-video", syn, "--model", "f-k1", "--out", str(out), "--quiet"]) == 0
     lines = out.read_text().splitlines()
-    assert lines[0].startswith("RadTan ") and len(lines[0].split()) == 9 and lines[1:] == ["320 240", "crop",
-                                                                                             "320 240"]  # fmt: skip
+    assert lines[0].startswith("RadTan ") and len(lines[0].split()) == 9
+    assert lines[1] == lines[3] == "320 240" and len(lines[2].split()) == 5  # the output camera, written out
     assert "k1=" in capsys.readouterr().out
     assert main(["run", syn, "--intrinsics", str(out), "--max-frames", "20", "--out", str(tmp_path / "run"),
                  "--no-progress", "--no-pointcloud", "--no-depth-images"]) == 0  # fmt: skip
+
+
+def test_the_radtan_file_spells_out_its_output_camera(tmp_path):
+    """Line 3 of the f-k1 file is the camera dmtrack's ``crop`` gives, written out: DSO's own ``crop`` folds the image
+    of a k1 < 0 lens (it chose fx ≈ 63 for 7-Scenes' file, tools/dso_oracle); read back, the same camera as ``crop``."""
+    from dmtrack.datasets.undistort import read_calibration_file
+    from dmtrack.pipeline.self_calibration import SelfCalibration, write_intrinsics
+
+    calib = SelfCalibration(517.6672, 517.6672, 320.0, 240.0, {}, True, 640, 480, k1=-0.035908, method="tracks",
+                            model="f-k1")  # fmt: skip
+    lines = write_intrinsics(calib, tmp_path / "cam.txt", "test").read_text().splitlines()
+    assert lines[2] != "crop" and len(lines[2].split()) == 5
+    given = read_calibration_file(tmp_path / "cam.txt").undistorter()
+    (tmp_path / "crop.txt").write_text("\n".join([lines[0], lines[1], "crop", lines[3]]) + "\n")
+    crop = read_calibration_file(tmp_path / "crop.txt").undistorter()
+    assert given.mode == "given" and crop.mode == "crop" and given.camera.fx == pytest.approx(510.46, abs=0.01)
+    for a, b in ((given.camera.fx, crop.camera.fx), (given.camera.fy, crop.camera.fy),
+                 (given.camera.cx, crop.camera.cx), (given.camera.cy, crop.camera.cy)):  # fmt: skip
+        assert a == pytest.approx(b, abs=1e-4)
 
 
 def test_the_window_method_takes_no_k1(tmp_path, capsys):

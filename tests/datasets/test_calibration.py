@@ -146,7 +146,13 @@ def test_cli_writes_a_calibration_that_round_trips_and_undistorts(views: Path, t
     assert result["views_used"] == 11 and list(result["rejected_views_px"]) == ["view11.png"]
     assert result["image_size"] == [W, H] and result["board"]["inner_corners"] == [9, 6]
     cal = read_calibration_file(out)
-    assert isinstance(cal.model, RadTanModel) and cal.output == "crop" and cal.output_size == (W, H)
+    # "crop" written out as its output camera (DSO's own crop folds a k1 < 0 lens): the camera dmtrack's crop gives
+    crop = read_calibration_file(out).model
+    from dmtrack.datasets.undistort import Undistorter
+    expected = Undistorter.create(crop, "crop", (W, H), multiple=1).camera
+    assert isinstance(cal.model, RadTanModel) and cal.output_size == (W, H) and not isinstance(cal.output, str)
+    assert [cal.output.fx, cal.output.fy, cal.output.cx, cal.output.cy] == pytest.approx(
+        [expected.fx, expected.fy, expected.cx, expected.cy], abs=1e-6)
     m = cal.model
     assert (m.fx, m.fy, m.cx, m.cy, m.k1, m.k2, m.p1, m.p2) == tuple(
         result[k] for k in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"))  # exactly: the numbers round-trip

@@ -14,7 +14,8 @@ reads, what ``--intrinsics FILE`` and a video's ``camera.txt`` sidecar accept)::
 
     RadTan fx fy cx cy k1 k2 p1 p2      (pixels)
     W H                                 (input size)
-    crop                                (output: the largest undistorted rectangle without invalid pixels)
+    fx' fy' cx' cy' 0                   (output: the largest undistorted rectangle without invalid pixels,
+                                         relative to W H; DSO's own "crop" folds a k1 < 0 lens, so it is written out)
     W H                                 (output size, reduced to a multiple of 16 when used)
 
 It is read back before it replaces any existing file.  A JSON sidecar (``camera.json`` for ``camera.txt``)
@@ -40,9 +41,10 @@ import numpy as np
 
 from dmtrack.datasets.imagefolder import list_images
 from dmtrack.datasets.stream import CaptureFactory, capture_target, is_stream
-from dmtrack.datasets.undistort import read_calibration_file
+from dmtrack.datasets.undistort import Undistorter, crop_output_line, read_calibration_file
 from dmtrack.datasets.video import detect as is_video
 from dmtrack.errors import DmtrackError, InputError, OutputError
+from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.geometry.distortion import RadTanModel
 from dmtrack.io.atomic import atomic_path, write_text
 from dmtrack.io.images import read_image
@@ -379,10 +381,12 @@ class CameraCalibration:
         return RadTanModel(self.fx, self.fy, self.cx, self.cy, w, h, *self.coefficients)
 
     def dso_text(self, output: Literal["crop", "full"] = "crop") -> str:
-        """The 4-line DSO calibration file (numbers written to round-trip exactly)."""
+        """The 4-line DSO calibration file (numbers written to round-trip exactly); ``crop``'s output camera is
+        written out (:func:`~dmtrack.datasets.undistort.crop_output_line`: DSO's own ``crop`` folds k1 < 0 lenses)."""
         w, h = self.image_size
         numbers = " ".join(repr(float(v)) for v in (self.fx, self.fy, self.cx, self.cy, *self.coefficients))
-        return f"RadTan {numbers}\n{w} {h}\n{output}\n{w} {h}\n"
+        line3 = crop_output_line(self.model(), (w, h)) if output == "crop" else output
+        return f"RadTan {numbers}\n{w} {h}\n{line3}\n{w} {h}\n"
 
     def to_dict(self) -> dict[str, Any]:
         k1, k2, p1, p2 = self.coefficients
@@ -501,6 +505,11 @@ def sidecar_path(path: str | Path) -> Path:
     return side if side != path else path.with_name(path.name + ".result.json")
 
 
+def _crop_camera(model: RadTanModel) -> list[float]:
+    cam = Undistorter.create(model, "crop", (model.width, model.height), multiple=1).camera
+    return [cam.fx, cam.fy, cam.cx, cam.cy]
+
+
 def write_calibration(
     calib: CameraCalibration, path: str | Path, output: Literal["crop", "full"] = "crop",
 ) -> tuple[Path, Path]:
@@ -523,7 +532,11 @@ def write_calibration(
                               f"{getattr(e, 'reason', e)}); nothing written", path) from None
         m = back.model
         expected = calib.model()
-        if not (isinstance(m, RadTanModel) and m == expected and back.output == output and not back.relative):
+        out = back.output
+        same_output = (isinstance(out, PinholeCamera) and (out.width, out.height) == calib.image_size
+                       and np.allclose([out.fx, out.fy, out.cx, out.cy], _crop_camera(expected), rtol=0, atol=1e-6)
+                       if output == "crop" else out == output)  # fmt: skip
+        if not (isinstance(m, RadTanModel) and m == expected and same_output and not back.relative):
             raise OutputError("the calibration does not read back as written; nothing written", path)
     side = sidecar_path(path)
     result = {**calib.to_dict(), "calibration_file": path.name, "output": output}

@@ -593,6 +593,19 @@ class UndistortedSequence:
         return f"UndistortedSequence({self.base!r}, {self.undistorter!r})"
 
 
+def crop_output_line(model: CameraModel, size: tuple[int, int]) -> str:
+    """Line 3 of a DSO calibration file whose output is ``crop``, written out: the output camera dmtrack's ``crop``
+    computes for ``model`` at ``size``, relative to the size as DSO reads it (``fx/w fy/h (cx+½)/w (cy+½)/h 0``).
+
+    DSO's own ``crop`` starts from the widest ray on the centre lines whose image lies inside the input, out to ±5
+    in normalised units; where a radial polynomial with k1 < 0 turns back, rays far out land inside the image again
+    and DSO chooses a folded image (fx ≈ 63 px for a 7-Scenes file with k1 = −0.036, ``tools/dso_oracle``). dmtrack
+    walks out from the centre and stops at the first invalid ray, so the camera written here is valid for both."""
+    w, h = size
+    cam = Undistorter.create(model, "crop", size, multiple=1).camera
+    return f"{cam.fx / w!r} {cam.fy / h!r} {(cam.cx + 0.5) / w!r} {(cam.cy + 0.5) / h!r} 0"
+
+
 def undistort_sequence(seq: Any, calibration: CalibrationFile, multiple: int = MULTIPLE) -> Any:
     """``seq`` wrapped in an :class:`UndistortedSequence`, or ``seq`` itself when nothing changes."""
     und = calibration.undistorter(multiple)

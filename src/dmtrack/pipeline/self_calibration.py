@@ -62,11 +62,12 @@ class SelfCalibration:
 def write_intrinsics(calib: SelfCalibration, path: str | Path, source: str) -> Path:
     """Write the estimate: ``fx fy cx cy`` with comment lines saying where they came from (the format
     :func:`~dmtrack.datasets.intrinsics.read_intrinsics_file` reads); with a radial coefficient (model ``"f-k1"``),
-    the 4-line ``RadTan`` calibration file of DSO, whose format has no comments."""
+    the 4-line ``RadTan`` calibration file of DSO, whose format has no comments, with its output camera written out
+    (:func:`_radtan_output`)."""
     p = Path(path)
     if calib.model == "f-k1":
         text = (f"RadTan {calib.fx:.4f} {calib.fy:.4f} {calib.cx:.4f} {calib.cy:.4f} {calib.k1:.6f} 0 0 0\n"
-                f"{calib.width} {calib.height}\ncrop\n{calib.width} {calib.height}\n")  # fmt: skip
+                f"{calib.width} {calib.height}\n{_radtan_output(calib)}\n{calib.width} {calib.height}\n")  # fmt: skip
         write_text(p, text)
         return p
     how = {"tracks": "self-calibrating bundle adjustment of corner tracks",
@@ -181,6 +182,21 @@ def calibrate_from_video(
             converged = True
             break
     return SelfCalibration(K[0], K[1], K[2], K[3], sigma, converged, width, height, history)
+
+
+def _radtan_output(calib: SelfCalibration) -> str:
+    """Line 3 of the ``RadTan`` file: ``crop``'s output camera written out (DSO's own ``crop`` folds the image of a
+    k1 < 0 lens; :func:`~dmtrack.datasets.undistort.crop_output_line`), or ``crop`` where none is valid."""
+    from dmtrack.datasets.undistort import crop_output_line
+    from dmtrack.errors import DatasetError
+    from dmtrack.geometry.distortion import RadTanModel
+
+    w, h = calib.width, calib.height
+    try:
+        return crop_output_line(RadTanModel(calib.fx, calib.fy, calib.cx, calib.cy, w, h, calib.k1, 0.0, 0.0, 0.0),
+                                (w, h))  # fmt: skip
+    except (DatasetError, InputError, ValueError):
+        return "crop"  # no valid crop: the reader says why
 
 
 def _size(seq: Any) -> tuple[int, int]:

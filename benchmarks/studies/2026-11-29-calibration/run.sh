@@ -160,3 +160,10 @@ for p in sorted(Path(sys.argv[1]).glob("gt-*.json")):
                        "corners": last["points"], "frames_used": last["keyframes"]}
 print(json.dumps(out, indent=1))
 PYEOF
+$PY -m dmtrack calibrate-from-video $SEQ --method groundtruth --model f-k1 --max-frames 350 \
+  --out $D/7scenes-colour-groundtruth-0-349.txt --quiet
+HELD=7s-350-699,$(for s in 50 100 150 200 250 300 350 400 450 500; do printf 'scan-%s,' $s; done | sed 's/,$//')
+$PY benchmarks/window_ab.py --features gray,bitplanes --sets 7s-0-349,$HELD --jobs 2 \
+  --variant "gt=--intrinsics=$D/7scenes-colour-groundtruth-0-349.txt" \
+  --variant "affine=--intrinsics=$D/7scenes-colour-tracks-affine-0-349.txt" \
+  --off-from $D/held_tracks_affine.json --json $D/held_groundtruth_calibration.json

@@ -236,7 +236,7 @@ def test_the_window_method_takes_no_k1(tmp_path, capsys):
 
     assert main(["calibrate-from-video", SYN, "--method", "window", "--model", "f-k1", "--out",
                  str(tmp_path / "c")]) != 0  # fmt: skip
-    assert "only the tracks method estimates k1" in capsys.readouterr().err
+    assert "only the tracks and groundtruth methods estimate k1" in capsys.readouterr().err
     assert main(["calibrate-from-video", SYN, "--model", "f-c", "--out", str(tmp_path / "c")]) != 0
     assert "the tracks method estimates f or f-k1" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()

@@ -41,7 +41,7 @@ import numpy as np
 
 from dmtrack.datasets.imagefolder import list_images
 from dmtrack.datasets.stream import CaptureFactory, capture_target, is_stream
-from dmtrack.datasets.undistort import Undistorter, crop_output_line, read_calibration_file
+from dmtrack.datasets.undistort import crop_camera, crop_output_line, read_calibration_file
 from dmtrack.datasets.video import detect as is_video
 from dmtrack.errors import DmtrackError, InputError, OutputError
 from dmtrack.geometry.camera import PinholeCamera
@@ -505,11 +505,6 @@ def sidecar_path(path: str | Path) -> Path:
     return side if side != path else path.with_name(path.name + ".result.json")
 
 
-def _crop_camera(model: RadTanModel) -> list[float]:
-    cam = Undistorter.create(model, "crop", (model.width, model.height), multiple=1).camera
-    return [cam.fx, cam.fy, cam.cx, cam.cy]
-
-
 def write_calibration(
     calib: CameraCalibration, path: str | Path, output: Literal["crop", "full"] = "crop",
 ) -> tuple[Path, Path]:
@@ -533,9 +528,13 @@ def write_calibration(
         m = back.model
         expected = calib.model()
         out = back.output
-        same_output = (isinstance(out, PinholeCamera) and (out.width, out.height) == calib.image_size
-                       and np.allclose([out.fx, out.fy, out.cx, out.cy], _crop_camera(expected), rtol=0, atol=1e-6)
-                       if output == "crop" else out == output)  # fmt: skip
+        if output == "crop":  # written out as crop's camera (see crop_output_line)
+            crop = crop_camera(expected, calib.image_size)
+            same_output = (isinstance(out, PinholeCamera) and (out.width, out.height) == calib.image_size
+                           and np.allclose([out.fx, out.fy, out.cx, out.cy], [crop.fx, crop.fy, crop.cx, crop.cy],
+                                           rtol=0, atol=1e-6))  # fmt: skip
+        else:
+            same_output = out == output
         if not (isinstance(m, RadTanModel) and m == expected and same_output and not back.relative):
             raise OutputError("the calibration does not read back as written; nothing written", path)
     side = sidecar_path(path)

@@ -593,6 +593,11 @@ class UndistortedSequence:
         return f"UndistortedSequence({self.base!r}, {self.undistorter!r})"
 
 
+def crop_camera(model: CameraModel, size: tuple[int, int]) -> PinholeCamera:
+    """The output camera of ``crop`` for ``model`` at ``size`` (not reduced to a multiple)."""
+    return Undistorter.create(model, "crop", size, multiple=1).camera
+
+
 def crop_output_line(model: CameraModel, size: tuple[int, int]) -> str:
     """Line 3 of a DSO calibration file whose output is ``crop``, written out: the output camera dmtrack's ``crop``
     computes for ``model`` at ``size``, relative to the size as DSO reads it (``fx/w fy/h (cx+½)/w (cy+½)/h 0``).
@@ -602,7 +607,7 @@ def crop_output_line(model: CameraModel, size: tuple[int, int]) -> str:
     and DSO chooses a folded image (fx ≈ 63 px for a 7-Scenes file with k1 = −0.036, ``tools/dso_oracle``). dmtrack
     walks out from the centre and stops at the first invalid ray, so the camera written here is valid for both."""
     w, h = size
-    cam = Undistorter.create(model, "crop", size, multiple=1).camera
+    cam = crop_camera(model, size)
     return f"{cam.fx / w!r} {cam.fy / h!r} {(cam.cx + 0.5) / w!r} {(cam.cy + 0.5) / h!r} 0"
 
 

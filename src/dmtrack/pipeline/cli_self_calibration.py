@@ -18,7 +18,7 @@ def cmd_calibrate_from_video(args: argparse.Namespace) -> int:
         raise InputError(f"--model {args.model}: the {method} method estimates f or f-k1 (--method window for the "
                          "rest)")  # fmt: skip
     if method == "window" and args.model == "f-k1":
-        raise InputError("--model f-k1: only the tracks method estimates k1")
+        raise InputError("--model f-k1: only the tracks and groundtruth methods estimate k1")
 
     def show(rec: dict) -> None:
         if args.quiet:

@@ -1,6 +1,6 @@
 """Intrinsics from a sequence's own images, without a calibration board (``dmtrack calibrate-from-video``).
 
-Two methods (``method``):
+Three methods (``method``):
 
 * ``"tracks"`` (the default): the odometry runs once with the starting guess; corners are tracked over every
   ``step``-th tracked frame and a self-calibrating bundle adjustment (:mod:`dmtrack.calibration`) moves those
@@ -111,7 +111,8 @@ def calibrate_from_video(
         of 0.8 × the width (a field of view of about 64°, a phone's) and the image centre. With a file that
         undistorts (DSO's format), the tracks method estimates the camera of the undistorted images.
     model
-        ``"tracks"``: ``"f"`` (one focal length, the principal point kept) or ``"f-k1"`` (also k1). ``"window"``:
+        ``"tracks"``, ``"groundtruth"``: ``"f"`` (one focal length, the principal point kept) or ``"f-k1"`` (also
+        k1). ``"window"``:
         ``"f"``, ``"f-c"`` or ``"fxfy-c"`` (``WindowConfig``).
     method
         ``"tracks"``, ``"groundtruth"`` or ``"window"`` (see the module docstring).

@@ -266,6 +266,29 @@ def test_the_groundtruth_method_recovers_a_rendered_focal_length(tmp_path, capsy
     assert rc != 0 and "no ground-truth poses" in capsys.readouterr().err
 
 
+def test_the_groundtruth_method_associates_poses_timed_apart_from_the_frames():
+    """Ground truth on its own clock (TUM RGB-D's): each frame takes the pose nearest in time within 10 ms."""
+    from dmtrack.datasets import open_sequence
+    from dmtrack.io.trajectory import Trajectory
+    from dmtrack.pipeline.self_calibration import _calibrate_groundtruth
+
+    seq = open_sequence(SYN)
+
+    class Shifted:  # the rendered sequence with its poses stamped 4 ms late
+        timestamps = seq.timestamps
+        groundtruth = Trajectory(seq.groundtruth.timestamps + 0.004, seq.groundtruth.poses)
+
+        def __len__(self) -> int:
+            return len(seq)
+
+        def __getitem__(self, i: int):  # noqa: ANN204
+            return seq[i]
+
+    res = _calibrate_groundtruth(Shifted(), "shifted", [288.75, 288.75, 159.5, 119.5], (320, 240), "f", 5, 0, None,
+                                 None)  # fmt: skip
+    assert res.converged and abs(res.fx / 262.5 - 1) < 0.003
+
+
 @pytest.mark.shared
 def test_tsukuba_images_and_their_ground_truth_agree_on_622_px(shared_dir):
     """Tsukuba's own poses and its images' corner tracks agree on f ≈ 622 px (the documented 615 fits them worse:

@@ -239,10 +239,11 @@ def _calibrate_groundtruth(
     max_frames: int | None, on_iteration: Callable[[dict[str, Any]], None] | None,
 ) -> SelfCalibration:  # fmt: skip
     """The ``"groundtruth"`` method: every ``step``-th frame of ``start …`` that has a ground-truth pose (timed within
-    1 µs), those poses fixed, :func:`dmtrack.calibration.self_calibrate` on the points and the intrinsics."""
+    10 ms), those poses fixed, :func:`dmtrack.calibration.self_calibrate` on the points and the intrinsics."""
     import numpy as np
 
     from dmtrack.calibration import MODELS
+    from dmtrack.io.association import associate
 
     if model not in MODELS:
         raise InputError(f"calibrate-from-video: the groundtruth method estimates {' or '.join(MODELS)}, not "
@@ -254,21 +255,15 @@ def _calibrate_groundtruth(
         raise InputError(f"{source}: no ground-truth poses, which the groundtruth method needs (--method tracks "
                          "estimates the intrinsics from the images alone)")  # fmt: skip
     stop = len(seq) if max_frames is None else min(len(seq), start + max_frames)
-    times = np.asarray(seq.timestamps, np.float64)
-    gt_times = np.asarray(gt.timestamps, np.float64)
-    frames, poses = [], []
-    for i in range(start, stop):
-        j = int(np.argmin(np.abs(gt_times - times[i])))
-        if abs(gt_times[j] - times[i]) <= 1e-6:
-            frames.append(i)
-            poses.append(gt.poses[j])
-    frames, poses = frames[::step], poses[::step]
+    # each frame with the pose timed nearest to it within 10 ms, one to one (the evaluation's association, TUM's)
+    i_frame, i_gt = associate(np.asarray(seq.timestamps, np.float64)[start:stop], np.asarray(gt.timestamps), 0.01)
+    frames = (start + i_frame)[::step]
+    poses = np.asarray(gt.poses)[i_gt][::step]
     if len(frames) < 3:
         raise InputError(f"{source}: {len(frames)} frames {step} apart with a ground-truth pose in frames {start}–"
                          f"{stop - 1}; the groundtruth method needs 3")  # fmt: skip
     extra = {"groundtruth_frames": len(frames)}
-    return _adjust(seq, source, np.asarray(frames), np.asarray(poses), K, size, model, on_iteration, extra,
-                   fixed_poses=True)  # fmt: skip
+    return _adjust(seq, source, frames, poses, K, size, model, on_iteration, extra, fixed_poses=True)
 
 
 def _adjust(

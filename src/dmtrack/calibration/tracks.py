@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from dmtrack.calibration.bundle import Observations
-from dmtrack.initialization.tracks import grey_u8
+from dmtrack.initialization.tracks import follow_forward_backward, grey_u8, klt_parameters
 
 __all__ = ["refine_affine", "track_keyframes"]
 
@@ -84,8 +84,7 @@ def track_keyframes(
 ) -> Observations:
     """Corner tracks through ``images`` (the keyframes, in order: grey or colour, uint8 or float); the observations'
     ``camera`` is the index in ``images``, ``point`` the track."""
-    lk = {"winSize": (int(window), int(window)), "maxLevel": int(levels),
-          "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}  # fmt: skip
+    lk = klt_parameters(window, levels)
     greys: list[np.ndarray | None] = []  # a keyframe's image while a live track started on it (and the newest)
     pts = np.zeros((0, 2), np.float32)
     ids = np.zeros(0, np.int64)
@@ -102,9 +101,7 @@ def track_keyframes(
         greys.append(grey)
         h, w = grey.shape
         if k > 0 and len(pts):
-            nxt, st, _ = cv2.calcOpticalFlowPyrLK(previous, grey, pts, None, **lk)
-            back, st_back, _ = cv2.calcOpticalFlowPyrLK(grey, previous, nxt, None, **lk)
-            ok = (st[:, 0] == 1) & (st_back[:, 0] == 1) & (np.linalg.norm(back - pts, axis=1) < max_fb_error)
+            nxt, ok = follow_forward_backward(previous, grey, pts, lk, max_fb_error)
             refined = nxt.astype(np.float64)
             new_warps = warps.copy()
             for fk in np.unique(first_k[ok]):

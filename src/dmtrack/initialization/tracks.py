@@ -17,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["CornerTracks", "grey_u8", "grid_coverage"]
+__all__ = ["CornerTracks", "follow_forward_backward", "grey_u8", "grid_coverage", "klt_parameters"]
 
 
 def grid_coverage(points: np.ndarray, width: int, height: int, cells: int = 3, per_cell: int = 3) -> float:
@@ -78,11 +78,7 @@ class CornerTracks:
         self._obs: list[np.ndarray] = [self.first.copy()]
         self._greys: list[np.ndarray] = [grey]
         self._current = self.first.copy()
-        self._lk = {
-            "winSize": (int(window), int(window)),
-            "maxLevel": int(levels),
-            "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01),
-        }
+        self._lk = klt_parameters(window, levels)
         self._max_fb = float(max_fb_error)
 
     def __len__(self) -> int:
@@ -96,11 +92,9 @@ class CornerTracks:
 
     def _follow(self, a: np.ndarray, b: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``pts`` of image ``a`` in image ``b`` and which survived the KLT, forward-backward and bounds checks."""
-        nxt, st, _ = cv2.calcOpticalFlowPyrLK(a, b, pts, None, **self._lk)
-        back, st_back, _ = cv2.calcOpticalFlowPyrLK(b, a, nxt, None, **self._lk)
+        nxt, ok = follow_forward_backward(a, b, pts, self._lk, self._max_fb)
         h, w = b.shape
-        ok = (st[:, 0] == 1) & (st_back[:, 0] == 1) & np.all(np.isfinite(nxt), axis=1)
-        ok &= np.linalg.norm(back - pts, axis=1) < self._max_fb
+        ok &= np.all(np.isfinite(nxt), axis=1)
         ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] <= w - 1) & (nxt[:, 1] >= 0) & (nxt[:, 1] <= h - 1)
         return nxt, ok
 
@@ -156,6 +150,24 @@ class CornerTracks:
     def current(self) -> np.ndarray:
         """(n_alive, 2) float32: the live tracks in the newest frame."""
         return self._current[self.alive]
+
+
+def klt_parameters(window: int, levels: int) -> dict:
+    """OpenCV's pyramidal KLT settings: a ``window`` × ``window`` patch, ``levels`` pyramid levels above the image, at
+    most 30 iterations or a step under 0.01 px."""
+    return {"winSize": (int(window), int(window)), "maxLevel": int(levels),
+            "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}  # fmt: skip
+
+
+def follow_forward_backward(
+    a: np.ndarray, b: np.ndarray, pts: np.ndarray, lk: dict, max_fb_error: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``pts`` (float32, (n, 2)) of grey image ``a`` followed into ``b`` by KLT (``lk``: :func:`klt_parameters`), and
+    which were found both ways and came back to within ``max_fb_error`` px of where they started."""
+    nxt, st, _ = cv2.calcOpticalFlowPyrLK(a, b, pts, None, **lk)
+    back, st_back, _ = cv2.calcOpticalFlowPyrLK(b, a, nxt, None, **lk)
+    ok = (st[:, 0] == 1) & (st_back[:, 0] == 1) & (np.linalg.norm(back - pts, axis=1) < max_fb_error)
+    return nxt, ok
 
 
 def _detect(grey: np.ndarray, corners: int, min_distance: float, mask: np.ndarray | None) -> np.ndarray:

@@ -11,7 +11,15 @@ import pytest
 
 from dmtrack.errors import OutputError
 from dmtrack.io.ply import VERTEX_DTYPE, PlyStream, ply_header, read_ply, vertex_records, write_ply
-from dmtrack.viz.depth import NEGATIVE_COLOUR, inverse_depth_image, write_png
+from dmtrack.viz.depth import (
+    NEGATIVE_COLOUR,
+    colour_table,
+    inverse_depth_codes,
+    inverse_depth_image,
+    palette_png,
+    write_depth_png,
+    write_png,
+)
 
 
 def test_ply_round_trip(tmp_path: Path) -> None:
@@ -42,6 +50,32 @@ def test_inverse_depth_image_marks_negative_depths(tmp_path: Path) -> None:
     assert near[0] > near[2] and far[2] > far[0]
     write_png(tmp_path / "d.png", out)
     assert (tmp_path / "d.png").stat().st_size > 0
+
+
+def test_depth_png_decodes_to_the_rgb_picture(tmp_path: Path) -> None:
+    """The run's depth pictures are palette PNGs: OpenCV and Pillow read them back as exactly the RGB picture of
+    inverse_depth_image (every code, negative and missing depths, a grey and a colour image)."""
+    import cv2
+    from PIL import Image
+
+    rng = np.random.default_rng(3)
+    h, w = 37, 53
+    idepth = rng.uniform(-0.3, 2.0, size=(h, w)).astype(np.float32)
+    idepth[0, :3] = (np.nan, np.inf, 0.0)
+    valid = rng.random((h, w)) < 0.7
+    for image in (rng.integers(0, 256, (h, w), dtype=np.uint8), rng.integers(0, 256, (h, w, 3), dtype=np.uint8)):
+        rgb = inverse_depth_image(idepth, valid, image)
+        codes = inverse_depth_codes(idepth, valid, image)
+        assert np.array_equal(colour_table()[codes], rgb)
+        write_depth_png(tmp_path / "d.png", codes)
+        assert np.array_equal(cv2.imread(str(tmp_path / "d.png"))[..., ::-1], rgb)
+        with Image.open(tmp_path / "d.png") as im:
+            assert im.mode == "P" and np.array_equal(np.asarray(im.convert("RGB")), rgb)
+    every = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    decoded = cv2.imdecode(np.frombuffer(palette_png(every, colour_table()), np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(decoded[..., ::-1], colour_table()[every])
+    with pytest.raises(ValueError, match="palette_png"):
+        palette_png(every, np.zeros((257, 3), np.uint8))
 
 
 def _chunks(rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -9,7 +9,8 @@
                        keyframe's); ``pointcloud.ply`` appears, atomically, when the run closes, also after a
                        tracking loss or an interrupt (:class:`~dmtrack.io.ply.PlyStream`).
 ``depth/``             one picture per keyframe: inverse depth over the dimmed image, negative inverse
-                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically;
+                       depths in magenta (:func:`dmtrack.viz.depth.inverse_depth_image`), each written atomically
+                       as a palette PNG (:func:`dmtrack.viz.depth.write_depth_png`: the same RGB when decoded);
                        and ``initial_map.png``, the first keyframe's map as the start left it (random, geometric
                        or ground truth), before any frame was mapped into it.
 ``metrics.json``       written by the caller (:func:`dmtrack.pipeline.run_to_directory`), not by the sink.
@@ -32,7 +33,7 @@ from dmtrack.io.atomic import output_error, prepare_folder, remove_stale_tempora
 from dmtrack.io.ply import PlyStream
 from dmtrack.io.trajectory import tum_line
 from dmtrack.odometry.sink import KeyframeSnapshot
-from dmtrack.viz.depth import inverse_depth_image, write_png
+from dmtrack.viz.depth import inverse_depth_codes, write_depth_png
 
 TUM_HEADER = "# timestamp tx ty tz qx qy qz qw  (camera-to-world, TUM format)\n"
 #: The picture of the first keyframe's map as the start made it, in ``depth/``.
@@ -127,14 +128,14 @@ class RunDirectorySink:
             except OutputError as e:  # as for a cloud held in memory: the run goes on, close() reports it
                 self._cloud_error = e
         if self.depth_images and snap.image is not None:
-            picture = inverse_depth_image(snap.idepth, snap.valid, snap.image)
-            write_png(self.depth_dir / f"kf_{keyframe_id:04d}_frame_{frame_index:06d}.png", picture)
+            codes = inverse_depth_codes(snap.idepth, snap.valid, snap.image)
+            write_depth_png(self.depth_dir / f"kf_{keyframe_id:04d}_frame_{frame_index:06d}.png", codes)
 
     def on_initial_map(self, snapshot: KeyframeSnapshot) -> None:
         """The first keyframe's map as the start made it: ``depth/initial_map.png``."""
         if self.depth_images and snapshot.image is not None:
-            picture = inverse_depth_image(snapshot.idepth, snapshot.valid, snapshot.image)
-            write_png(self.depth_dir / INITIAL_MAP_PNG, picture)
+            codes = inverse_depth_codes(snapshot.idepth, snapshot.valid, snapshot.image)
+            write_depth_png(self.depth_dir / INITIAL_MAP_PNG, codes)
 
     def on_lost(self, frame_index: int, reason: str) -> None:
         self.lost.append((frame_index, reason))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dmtrack.calibration import Observations, self_calibrate, triangulate
-from dmtrack.calibration.bundle import _Problem, residuals_and_jacobians
+from dmtrack.calibration.bundle import _Problem, inverse_blocks, residuals_and_jacobians
 from dmtrack.geometry.lie import so3_exp
 
 
@@ -332,3 +332,22 @@ def test_a_calibration_file_is_used_as_it_is(tmp_path):
     calib.write_text("RadTan 280 280 159.5 119.5 0 0 0 0\n320 240\nnone\n320 240\n")
     res = calibrate_from_video("synthetic:n_frames=60,width=320,height=240,seed=1", intrinsics=str(calib))
     assert res.method == "tracks" and abs(res.fx / 262.5 - 1) < 0.005
+
+
+def test_point_blocks_inverted_even_where_one_is_singular() -> None:
+    """A point almost in a camera's plane has a huge block of rank 2 (7-Scenes 175+160: ~10²⁶, singular to LAPACK once
+    the 10⁻¹² on its diagonal is lost), which stopped calibrate-from-video at its σ. Its block gets the pseudo-inverse;
+    every other block is inverted as before, bit for bit."""
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(5, 3, 3))
+    regular = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3)
+    assert np.array_equal(inverse_blocks(regular), np.linalg.inv(regular))
+    a = 2.0**86  # ~8·10²⁵, a power of two: the elimination leaves an exact zero pivot
+    singular = np.array([[a, a, 0.0], [a, a, 0.0], [0.0, 0.0, a]]) + 1e-12 * np.eye(3)
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.inv(singular)
+    stack = np.concatenate([regular[:2], singular[None], regular[2:]])
+    out = inverse_blocks(stack)
+    assert np.isfinite(out).all()
+    assert np.array_equal(out[[0, 1, 3, 4, 5]], np.stack([np.linalg.inv(b) for b in regular]))
+    assert np.allclose(out[2], np.linalg.pinv(singular, hermitian=True), rtol=0, atol=1e-40)

@@ -132,6 +132,23 @@ def triangulate(R: np.ndarray, t: np.ndarray, f: float, cx: float, cy: float, ob
     return h[:, :3] / w[:, None]
 
 
+def inverse_blocks(C: np.ndarray) -> np.ndarray:
+    """The inverses of a stack of symmetric 3 × 3 point blocks (n, 3, 3); a block LAPACK finds singular gets its
+    pseudo-inverse instead, so that one degenerate point (one so close to a camera's plane that its block is ~10²⁶ and
+    of rank 2, as on 7-Scenes 175+160 without damping) cannot stop the adjustment or its σ. Where every block is
+    regular this is ``np.linalg.inv``, bit for bit."""
+    try:
+        return np.linalg.inv(C)
+    except np.linalg.LinAlgError:
+        out = np.empty_like(C)
+        for i, block in enumerate(C):
+            try:
+                out[i] = np.linalg.inv(block)
+            except np.linalg.LinAlgError:
+                out[i] = np.linalg.pinv(block, hermitian=True)
+        return out
+
+
 class _Problem:
     """One adjustment: the state, its residuals and the Levenberg–Marquardt steps (see the module docstring)."""
 
@@ -172,7 +189,7 @@ class _Problem:
         np.add.at(c, self.obs.point, np.einsum("nki,nk->ni", wJx, self.res))
         B = np.einsum("nki,nkj->nij", wJg, self.Jx)  # (n, nI + 6, 3)
         Cd = C + lam * np.einsum("nii->ni", C)[:, :, None] * np.eye(3) + 1e-12 * np.eye(3)
-        Ci = np.linalg.inv(Cd)
+        Ci = inverse_blocks(Cd)
         S = A.copy()
         S[np.diag_indices(self.G)] += lam * np.diag(A)
         s = a.copy()

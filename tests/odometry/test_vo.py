@@ -8,8 +8,9 @@ import pytest
 
 from dmtrack.datasets.synthetic import SyntheticConfig, SyntheticSequence
 from dmtrack.errors import InputError
-from dmtrack.odometry.config import KeyframeConfig, VOConfig
+from dmtrack.odometry.config import KeyframeConfig, TrackerConfig, VOConfig
 from dmtrack.odometry.sink import OutputSink
+from dmtrack.odometry.tracker import flags_at_good_level
 from dmtrack.odometry.vo import VisualOdometry, keyframe_score
 from dmtrack.outputs.memory import MemorySink, MultiSink
 
@@ -385,3 +386,31 @@ def test_a_config_yaml_of_an_earlier_version_still_reads() -> None:
         VOConfig.from_dict({"initializer": {"refine_iterations": 2}})
     with pytest.raises(InputError, match="no longer supported"):
         VOConfig().with_overrides("initializer.refine_iterations=1")
+
+
+@pytest.mark.parametrize("levels", [(4, 3, 2, 1, 0), (4, 3, 2)])
+def test_tracking_down_to_another_finest_level(seq, frames, levels) -> None:
+    """``tracker.levels`` ending finer (0) or coarser (2) than LSD-SLAM's level 1: the flags the depth map reads come
+    on its level-1 grid (an internal shape error before), and the odometry tracks the sequence."""
+    config = VOConfig(init="groundtruth", tracker=TrackerConfig(levels=levels))
+    _, results, res = run(seq, frames, config=config, n=15)
+    assert res.tracked_frames == 15 and res.lost_at is None and all(r.tracked for r in results)
+
+
+def test_good_flags_moved_to_level_one() -> None:
+    level = type("L", (), {})
+    frame = type("F", (), {"levels": []})()
+    for h, w in ((6, 8), (3, 4), (1, 2)):
+        lv = level()
+        lv.height, lv.width = h, w
+        frame.levels.append(lv)
+    fine = np.ones((6, 8), bool)
+    fine[0, 1] = False  # one bad pixel spoils its 2 × 2 block on level 1
+    out = flags_at_good_level(fine, 0, frame)
+    assert out.shape == (3, 4) and not out[0, 0] and out.sum() == 11
+    coarse = np.array([[True, False]])
+    out = flags_at_good_level(coarse, 2, frame)
+    assert out.shape == (3, 4) and out[:2, :2].all() and not out[:2, 2:].any()
+    assert out[2].tolist() == [True, True, False, False]  # the odd last row takes the last coarse row
+    same = np.zeros((3, 4), bool)
+    assert flags_at_good_level(same, 1, frame) is same

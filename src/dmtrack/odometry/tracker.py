@@ -35,6 +35,7 @@ import numpy as np
 
 from dmtrack.errors import InputError
 from dmtrack.geometry.exact import dot, matmul
+from dmtrack.odometry._depth_common import GOOD_LEVEL
 from dmtrack.odometry._tracker_multi import tracker_eval_kernels
 from dmtrack.odometry._tracker_normal_equations import (
     se3_exp,
@@ -419,7 +420,7 @@ class Tracker:
                 point_usage=ev.usage / max(n_points, 1),
                 last_residual=last_residual,
                 initial_tracked_residual=float("inf"),
-                ref_pixel_was_good=flags.reshape(fl_min.height, fl_min.width),
+                ref_pixel_was_good=flags_at_good_level(flags.reshape(fl_min.height, fl_min.width), min_level, frame),
                 affine=(a, b),
                 iterations=iterations,
                 evaluations=evaluations,
@@ -511,9 +512,27 @@ class Tracker:
             point_usage=float(usage),
             last_residual=float(last_residual),
             initial_tracked_residual=float(itr),
-            ref_pixel_was_good=flags.reshape(fl_min.height, fl_min.width),
+            ref_pixel_was_good=flags_at_good_level(flags.reshape(fl_min.height, fl_min.width), min_level, frame),
             affine=(float(a), float(b)),
             iterations=iterations,
             evaluations=evaluations,
             final_error=final_error,
         )
+
+
+def flags_at_good_level(flags: np.ndarray, level: int, frame: Frame) -> np.ndarray:
+    """The tracker's per-pixel ``refPixelWasGood`` flags of its finest ``level`` on the grid of
+    :data:`~dmtrack.odometry._depth_common.GOOD_LEVEL` (LSD-SLAM's ``SE3TRACKING_MIN_LEVEL``, 1), where the depth
+    map reads them: unchanged at that level (the default levels end there); tracked down to a finer level (e.g.
+    ``tracker.levels`` ending in 0), a pixel there is good when none of the pixels it covers was bad; ending coarser,
+    each pixel takes the flag of the coarse pixel it lies in."""
+    if level == GOOD_LEVEL:
+        return flags
+    h, w = frame.levels[GOOD_LEVEL].height, frame.levels[GOOD_LEVEL].width
+    if level < GOOD_LEVEL:
+        k = 1 << (GOOD_LEVEL - level)
+        return flags[: h * k, : w * k].reshape(h, k, w, k).all(axis=(1, 3))
+    k = level - GOOD_LEVEL
+    ys = np.minimum(np.arange(h) >> k, flags.shape[0] - 1)
+    xs = np.minimum(np.arange(w) >> k, flags.shape[1] - 1)
+    return flags[ys[:, None], xs[None, :]]

@@ -20,6 +20,9 @@ one() {  # KIND CAL START FRAMES [CALFILE]
       gray) X="--feature gray";; bitplanes) X="--feature bitplanes";;
       grayw5) X="--feature gray --window 5";; bitplanesw5) X="--feature bitplanes --window 5";;
       grayl0) X="--feature gray --set tracker.levels=[4,3,2,1,0]";;
+      grayw5m) X="--feature gray --window 5 --set window.leave=marginalise";;
+      grayw7) X="--feature gray --window 7";;
+      grayw7m) X="--feature gray --window 7 --set window.leave=marginalise";;
     esac
     .venv/bin/dmtrack run $SEQ --start "$S" --max-frames "$N" $X $A --out "$O" > "$O.log" 2>&1
   fi
@@ -42,6 +45,12 @@ for r in $HELD $CHOSEN; do
 done
 # tracking down to level 0, with the images' calibration: on the chosen-on runs only (it did not go further)
 for r in $CHOSEN; do one grayl0 v2 "${r%:*}" "${r#*:}" "$V2"; done
+# the window's size and how keyframes leave it: chosen on with v2 (all four), then the two marginalising ones held back
+for r in $CHOSEN; do
+  for K in grayw5 grayw5m grayw7 grayw7m; do one $K v2 "${r%:*}" "${r#*:}" "$V2"; done
+  for K in grayw5m grayw7m; do one $K 585 "${r%:*}" "${r#*:}"; done
+done
+for r in $HELD; do for K in grayw5m grayw7m; do one $K 585 "${r%:*}" "${r#*:}"; one $K v2 "${r%:*}" "${r#*:}" "$V2"; done; done
 
 D=benchmarks/studies/2026-11-29-common-error
 .venv/bin/python $D/table.py "$RUNS" $D/results.json > $D/results.txt

@@ -23,6 +23,8 @@ one() {  # KIND CAL START FRAMES [CALFILE]
       grayw5m) X="--feature gray --window 5 --set window.leave=marginalise";;
       grayw7) X="--feature gray --window 7";;
       grayw7m) X="--feature gray --window 7 --set window.leave=marginalise";;
+      grayw7mk07|grayw7mk10) X="--feature gray --window 7 --set window.leave=marginalise --set keyframe.threshold=0.${K#grayw7mk}";;
+      grayk10) X="--feature gray --set keyframe.threshold=0.10";;
     esac
     .venv/bin/dmtrack run $SEQ --start "$S" --max-frames "$N" $X $A --out "$O" > "$O.log" 2>&1
   fi
@@ -51,6 +53,10 @@ for r in $CHOSEN; do
   for K in grayw5m grayw7m; do one $K 585 "${r%:*}" "${r#*:}"; done
 done
 for r in $HELD; do for K in grayw5m grayw7m; do one $K 585 "${r%:*}" "${r#*:}"; one $K v2 "${r%:*}" "${r#*:}" "$V2"; done; done
+# more keyframes (keyframe.threshold 0.14 → 0.10, 0.07): chosen on with v2; 0.07 with the window of 7 then held back
+for r in $CHOSEN; do for K in grayk10 grayw7mk10 grayw7mk07; do one $K v2 "${r%:*}" "${r#*:}" "$V2"; done; done
+for r in $CHOSEN; do one grayw7mk07 585 "${r%:*}" "${r#*:}"; done
+for r in $HELD; do one grayw7mk07 585 "${r%:*}" "${r#*:}"; one grayw7mk07 v2 "${r%:*}" "${r#*:}" "$V2"; done
 
 D=benchmarks/studies/2026-11-29-common-error
 .venv/bin/python $D/table.py "$RUNS" $D/results.json > $D/results.txt

@@ -18,7 +18,6 @@ from dmtrack.viz.depth import (
     inverse_depth_image,
     palette_png,
     write_depth_png,
-    write_png,
 )
 
 
@@ -48,7 +47,7 @@ def test_inverse_depth_image_marks_negative_depths(tmp_path: Path) -> None:
     assert tuple(out[0, 0]) == (100, 100, 100)  # no hypothesis: dimmed image
     near, far = out[7, 24], out[7, 5]  # larger inverse depth = nearer = red
     assert near[0] > near[2] and far[2] > far[0]
-    write_png(tmp_path / "d.png", out)
+    write_depth_png(tmp_path / "d.png", inverse_depth_codes(idepth, valid, image))
     assert (tmp_path / "d.png").stat().st_size > 0
 
 
@@ -76,6 +75,8 @@ def test_depth_png_decodes_to_the_rgb_picture(tmp_path: Path) -> None:
     assert np.array_equal(decoded[..., ::-1], colour_table()[every])
     with pytest.raises(ValueError, match="palette_png"):
         palette_png(every, np.zeros((257, 3), np.uint8))
+    with pytest.raises(ValueError, match="code 255 has no colour in a table of 16"):
+        palette_png(every, colour_table()[:16])
 
 
 def _chunks(rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:

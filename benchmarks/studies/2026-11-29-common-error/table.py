@@ -32,6 +32,16 @@ def _metrics(folder: Path) -> dict | None:
     return m
 
 
+def _rounded(x):  # noqa: ANN001, ANN202 - 4 significant digits keep the file small and are all the figures carry
+    if isinstance(x, float):
+        return float(f"{x:.4g}")
+    if isinstance(x, dict):
+        return {k: _rounded(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_rounded(v) for v in x]
+    return x
+
+
 def main(runs: Path, out: Path) -> None:
     result: dict = {}
     for set_name, runs_of_set in (("held", HELD), ("chosen", CHOSEN)):
@@ -66,7 +76,7 @@ def main(runs: Path, out: Path) -> None:
                         }  # fmt: skip
                         entry["three_way_runs"] = three
                 result.setdefault(set_name, {}).setdefault(cal, {})[kind] = entry
-    out.write_text(json.dumps(result, indent=1))
+    out.write_text(json.dumps(_rounded(result), separators=(",", ":")) + "\n")
     for set_name, by_cal in result.items():
         print(f"## {set_name}")
         for cal, by_kind in by_cal.items():

@@ -103,6 +103,8 @@ def palette_png(codes: np.ndarray, table: np.ndarray) -> bytes:
     table = np.ascontiguousarray(table, dtype=np.uint8)
     if codes.ndim != 2 or table.ndim != 2 or table.shape[1] != 3 or not 1 <= table.shape[0] <= 256:
         raise ValueError(f"palette_png: codes (H, W) and a (≤ 256, 3) table, got {codes.shape} and {table.shape}")
+    if codes.size and int(codes.max()) >= len(table):
+        raise ValueError(f"palette_png: code {int(codes.max())} has no colour in a table of {len(table)}")
     h, w = codes.shape
     rows = np.zeros((h, w + 1), np.uint8)  # a filter-type byte (0: none) before each row
     rows[:, 1:] = codes
@@ -117,13 +119,3 @@ def write_depth_png(path, codes: np.ndarray) -> None:  # noqa: ANN001
     from dmtrack.io.atomic import write_bytes
 
     write_bytes(path, palette_png(codes, colour_table()))
-
-
-def write_png(path, image_rgb: np.ndarray) -> None:  # noqa: ANN001
-    """Write an RGB uint8 image as PNG (OpenCV wants BGR), atomically."""
-    from dmtrack.io.atomic import write_bytes
-
-    ok, data = cv2.imencode(".png", cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise ValueError(f"{path}: OpenCV cannot encode this image as PNG ({image_rgb.shape}, {image_rgb.dtype})")
-    write_bytes(path, data.tobytes())

@@ -27,6 +27,8 @@ one() {  # KIND CAL START FRAMES [CALFILE]
       grayk10) X="--feature gray --set keyframe.threshold=0.10";;
       grayw7mL0) X="--feature gray --window 7 --set window.leave=marginalise --set window.levels=[2,1,0]";;
       grayw7mP2) X="--feature gray --window 7 --set window.leave=marginalise --set window.points=2000";;
+      grayw7mDP01) X="--feature gray --window 7 --set window.leave=marginalise --set window.depth_prior=0.1";;
+      grayw7mI12) X="--feature gray --window 7 --set window.leave=marginalise --set window.iterations=12";;
     esac
     .venv/bin/dmtrack run $SEQ --start "$S" --max-frames "$N" $X $A --out "$O" > "$O.log" 2>&1
   fi
@@ -61,6 +63,10 @@ for r in $CHOSEN; do one grayw7mk07 585 "${r%:*}" "${r#*:}"; done
 for r in $HELD; do one grayw7mk07 585 "${r%:*}" "${r#*:}"; one grayw7mk07 v2 "${r%:*}" "${r#*:}" "$V2"; done
 # the window of 7 marginalised down to level 0, or with 2,000 points a keyframe: chosen on with v2 only
 for r in $CHOSEN; do for K in grayw7mL0 grayw7mP2; do one $K v2 "${r%:*}" "${r#*:}" "$V2"; done; done
+# a tenth of the depth prior, or 12 iterations: chosen on with v2; the depth prior then held back and at 585
+for r in $CHOSEN; do for K in grayw7mDP01 grayw7mI12; do one $K v2 "${r%:*}" "${r#*:}" "$V2"; done; done
+for r in $CHOSEN; do one grayw7mDP01 585 "${r%:*}" "${r#*:}"; done
+for r in $HELD; do one grayw7mDP01 585 "${r%:*}" "${r#*:}"; one grayw7mDP01 v2 "${r%:*}" "${r#*:}" "$V2"; done
 
 D=benchmarks/studies/2026-11-29-common-error
 .venv/bin/python $D/table.py "$RUNS" $D/results.json > $D/results.txt

@@ -19,7 +19,7 @@ from three_way import compare  # noqa: E402
 HELD = [(s, 160) for s in range(50, 501, 50)] + [(350, 350)]
 CHOSEN = [(0, 350)] + [(s, 160) for s in range(25, 476, 50)]
 KINDS = ("dso", "gray", "bitplanes", "grayw5", "bitplanesw5", "grayw5m", "grayw7", "grayw7m", "grayw7mk07",
-         "grayw7mk10", "grayk10", "grayw7mL0", "grayw7mP2", "grayl0")
+         "grayw7mk10", "grayk10", "grayw7mL0", "grayw7mP2", "grayw7mDP01", "grayw7mI12", "grayl0")
 
 
 def _metrics(folder: Path) -> dict | None:

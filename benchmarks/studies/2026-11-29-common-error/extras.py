@@ -19,6 +19,9 @@ from dmtrack.evaluation.metrics import _relative, _rotation_angle_rad, rotation_
 from dmtrack.io.association import associate_trajectories
 from dmtrack.io.trajectory import Trajectory, read_trajectory
 
+sys.path.insert(0, str(Path(__file__).parent))
+from three_way import common_frames  # noqa: E402
+
 HELD = [(s, 160) for s in range(50, 501, 50)] + [(350, 350)]
 FRAMES_APART = (1, 3, 10, 30, 60, 100)
 
@@ -42,12 +45,8 @@ def main(runs: Path, out: Path) -> None:
             rows = []
             for s, n in HELD:
                 d, o = runs / f"{kind}-{cal}-{s}-{n}", runs / f"dso-{cal}-{s}-{n}"
-                gt, a, b = (read_trajectory(p) for p in (d / "groundtruth.txt", d / "trajectory.txt",
-                                                          o / "trajectory.txt"))  # fmt: skip
-                b, a = associate_trajectories(b, a, max_diff=0.01)  # the frames DSO and dmtrack both posed
-                g, a = associate_trajectories(gt, a, max_diff=0.01)
-                b, a = associate_trajectories(b, a, max_diff=0.01)
-                g, a = associate_trajectories(g, a, max_diff=0.01)
+                g, a, b = common_frames(*(read_trajectory(p) for p in (d / "groundtruth.txt", d / "trajectory.txt",
+                                                                        o / "trajectory.txt")), f"{s}+{n}")  # fmt: skip
                 kf = np.loadtxt(d / "keyframes.txt", ndmin=2)[:, 0]
                 keep = np.isin(np.round(a.timestamps, 4), np.round(kf, 4))
                 r = [rpe_paper(g, x) for x in (a, b)] + [rpe_paper(_sub(g, keep), _sub(x, keep)) for x in (a, b)]

@@ -26,7 +26,7 @@ import numpy as np
 
 from dmtrack.evaluation.metrics import _relative, _rotation_angle_rad, rpe_pairs
 from dmtrack.io.association import associate_trajectories
-from dmtrack.io.trajectory import read_trajectory
+from dmtrack.io.trajectory import Trajectory, read_trajectory
 
 
 def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -41,17 +41,22 @@ def _hat(ab: float, ag: float, bg: float) -> dict[str, float]:
     return {k: float(np.sqrt(max(v, 0.0))) for k, v in own.items()}
 
 
-def compare(name: str, dm_dir: str, dso_dir: str, r_l: float = 1.0 / 3.0) -> dict:
-    """The three comparisons of one run on the frames both methods posed."""
-    gt = read_trajectory(f"{dm_dir}/groundtruth.txt")
-    dm = read_trajectory(f"{dm_dir}/trajectory.txt")
-    dso = read_trajectory(f"{dso_dir}/trajectory.txt")
-    # the frames all three have (DSO poses from its own start on, dmtrack from its geometric start's frame on)
+def common_frames(gt: Trajectory, dm: Trajectory, dso: Trajectory, name: str) -> tuple[Trajectory, ...]:
+    """The ground truth, dmtrack's and DSO's poses of the frames all three have (DSO poses from its own start on,
+    dmtrack from its geometric start's frame on), in that order."""
     b, a = associate_trajectories(dso, dm, max_diff=0.01)
-    g, a2 = associate_trajectories(gt, a, max_diff=0.01)
-    b, a = associate_trajectories(b, a2, max_diff=0.01)
+    g, a = associate_trajectories(gt, a, max_diff=0.01)
+    b, a = associate_trajectories(b, a, max_diff=0.01)
+    g, a = associate_trajectories(g, a, max_diff=0.01)
     if not (len(g) == len(a) == len(b)) or len(g) < 10:
         raise SystemExit(f"{name}: only {len(g)} frames posed by both methods and in the ground truth")
+    return g, a, b
+
+
+def compare(name: str, dm_dir: str, dso_dir: str, r_l: float = 1.0 / 3.0) -> dict:
+    """The three comparisons of one run on the frames both methods posed."""
+    g, a, b = common_frames(read_trajectory(f"{dm_dir}/groundtruth.txt"), read_trajectory(f"{dm_dir}/trajectory.txt"),
+                            read_trajectory(f"{dso_dir}/trajectory.txt"), name)  # fmt: skip
     keys = ("dmtrack_gt", "dso_gt", "dmtrack_dso")
     per_m = {k: {"trans": [], "rot": []} for k in keys}
     pooled = {k: {"trans": [], "rot": []} for k in keys}

@@ -6,6 +6,7 @@ The kernels a process has compiled or loaded cannot be unloaded, so the checks t
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 import signal
@@ -122,6 +123,13 @@ def test_warmup_command(capsys: pytest.CaptureFixture[str]) -> None:
     for line in lines[:2]:
         assert re.fullmatch(r"\S+ +\d+\.\d s  \(\d+ kernels compiled, \d+ loaded from the cache\)", line), line
     assert lines[2].startswith("numba's cache: ") and Path(lines[2].split(": ", 1)[1]).is_dir()
+    assert re.fullmatch(r"Python bytecode: \d+ of dmtrack's modules compiled into __pycache__", lines[3]), lines[3]
+    # every module of the package now has a fresh cache: the next import compiles nothing
+    import dmtrack
+    from dmtrack.io.machine import _bytecode_fresh
+
+    sources = sorted(Path(dmtrack.__file__).parent.rglob("*.py"))
+    assert sources and all(_bytecode_fresh(p, Path(importlib.util.cache_from_source(str(p)))) for p in sources)
     assert main(["warmup", "--feature", "no-such-feature"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no-such-feature" in err[0]

@@ -231,6 +231,27 @@ class _CountingFrames:
         return self._count(self._seq.read_frame(i, depth=depth))
 
 
+def test_odometry_failing_to_build_stops_the_start_it_ran_beside(sample_dir: Path, monkeypatch) -> None:
+    """The run builds its odometry (importing numba's kernels) while the geometric start reads the first frames. When
+    building fails, that error is raised, and the start stops at its next frame instead of reading on to its end."""
+    import threading
+    import time
+
+    from dmtrack.datasets import open_sequence
+    from dmtrack.odometry import vo
+
+    def fails(self, *args, **kwargs) -> None:
+        time.sleep(0.05)  # the start has begun reading
+        raise RuntimeError("the odometry could not be built")
+
+    monkeypatch.setattr(vo.VisualOdometry, "__init__", fails)
+    seq = _CountingFrames(open_sequence(sample_dir))
+    with pytest.raises(RuntimeError, match="could not be built"):
+        track(seq, max_frames=60)
+    assert 0 < seq.reads < 30  # the start accepts at frame 33 of this sequence when it runs to its end
+    assert not any(t.name.startswith("dmtrack-start") for t in threading.enumerate())
+
+
 _SLOW_RUN = r"""
 import sys, time
 import numpy as np
@@ -308,7 +329,7 @@ def test_the_start_holds_few_frames_and_startup_is_measured(tmp_path: Path, samp
     run_to_directory(vseq, tmp_path / "c", max_frames=60, depth_images=False, pointcloud=False)
     assert vseq.reads == 60
     s = m["startup"]
-    assert set(s) == {"import_s", "run_s", "warmup_s", "start_s", "first_frame_s"}
+    assert set(s) == {"import_s", "run_s", "odometry_import_s", "warmup_s", "start_s", "first_frame_s"}
     if s["run_s"] is not None:  # Linux: ages of the process
         assert 0 < s["import_s"] <= s["run_s"] < s["first_frame_s"]
-        assert s["warmup_s"] >= 0 and s["start_s"] >= 0
+        assert s["warmup_s"] >= 0 and s["start_s"] >= 0 and s["odometry_import_s"] >= 0

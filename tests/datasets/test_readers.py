@@ -307,3 +307,36 @@ def test_sample_sequence_shipped(sample_dir: Path) -> None:
     assert (seq.format, len(seq), seq.width, seq.height) == ("7scenes", 300, 640, 480)
     assert seq.has_groundtruth and not seq.has_depth
     assert seq[299].image.shape == (480, 640, 3)
+
+
+def test_7scenes_pose_files_read_together_equal_each_read_alone(tmp_path: Path) -> None:
+    """``read_pose_files`` (a folder's poses, checked and projected all at once) gives the bytes of
+    ``read_pose_file`` on each; with a file it refuses, the first such file's error, naming it."""
+    from dmtrack.datasets.sevenscenes import read_pose_file, read_pose_files
+
+    rng = np.random.default_rng(3)
+    texts = []
+    for k in range(12):
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_rotvec(rng.normal(size=3)).as_matrix() * (0.9997 if k % 3 else 1.0)
+        pose[:3, 3] = rng.normal(size=3)
+        texts.append("\n".join(" ".join(f"{v:.7e}" for v in row) for row in pose) + "\n")
+    texts[4] = texts[4].replace(texts[4].split()[0], "-inf", 1)  # KinectFusion's failed frame
+    paths = []
+    for k, text in enumerate(texts):
+        paths.append(tmp_path / f"frame-{k:06d}.pose.txt")
+        paths[-1].write_text(text)
+    together = read_pose_files(paths)
+    assert together.tobytes() == np.stack([read_pose_file(p) for p in paths]).tobytes()
+    assert np.isnan(together[4]).all() and np.isfinite(np.delete(together, 4, axis=0)).all()
+    paths[7].write_text("\n".join(texts[7].splitlines()[:3] + ["0 0 0.5 1"]) + "\n")  # not a rigid motion
+    paths[9].write_text("1 2 three\n")
+    with pytest.raises(InputError) as alone:
+        read_pose_file(paths[7])
+    with pytest.raises(InputError) as first:  # the earlier of the two bad files
+        read_pose_files(paths)
+    assert str(first.value) == str(alone.value) and paths[7].name in str(first.value)
+    paths[7].write_text(texts[7])
+    with pytest.raises(InputError, match="three") as e:
+        read_pose_files(paths)
+    assert paths[9].name in str(e.value)

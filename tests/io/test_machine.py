@@ -132,3 +132,43 @@ assert poly(5.0) == 12.0 and np.isclose(poly(0.5), 0.75)
 print('ok')
 """
     assert _python(code) == "ok"
+
+
+def test_compile_bytecode_writes_what_is_missing_or_stale(tmp_path, monkeypatch) -> None:
+    """Missing caches are written (also under PYTHONDONTWRITEBYTECODE), fresh ones are left alone, a changed source
+    gets a new one that Python's import accepts, and a file that does not compile is counted, not raised."""
+    import importlib
+    import importlib.util
+    import os
+    from pathlib import Path
+
+    from dmtrack.io.machine import _bytecode_fresh, compile_bytecode
+
+    pkg = tmp_path / "bcpkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("VALUE = 1\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "b.py").write_text("def f():\n    return 2\n")
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    assert compile_bytecode(pkg) == (4, 0)
+    a_pyc = Path(importlib.util.cache_from_source(str(pkg / "a.py")))
+    assert a_pyc.is_file() and _bytecode_fresh(pkg / "a.py", a_pyc)
+    assert compile_bytecode(pkg) == (0, 0)
+    (pkg / "a.py").write_text("VALUE = 12\n")  # another size: stale whatever the clock's resolution
+    assert not _bytecode_fresh(pkg / "a.py", a_pyc)
+    assert compile_bytecode(pkg) == (1, 0)
+    # Python's import takes that cache: a source changed under the same size and time still imports as cached
+    st = (pkg / "a.py").stat()
+    (pkg / "a.py").write_text("VALUE = 13\n")
+    os.utime(pkg / "a.py", ns=(st.st_atime_ns, st.st_mtime_ns))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert importlib.import_module("bcpkg.a").VALUE == 12
+    (pkg / "bad.py").write_text("def (:\n")
+    assert compile_bytecode(pkg) == (0, 1)
+    (pkg / "sub" / "b.py").write_text("def f():\n    return 22\n")
+    for cached in (pkg / "sub" / "__pycache__").iterdir():
+        cached.unlink()
+    (pkg / "sub" / "__pycache__").rmdir()
+    (pkg / "sub" / "__pycache__").write_text("")  # a file where the cache's folder should be: nothing can be written
+    assert compile_bytecode(pkg) == (0, 3)  # sub/__init__.py, sub/b.py and bad.py

@@ -28,8 +28,6 @@ from __future__ import annotations
 import hashlib
 import sys
 import tarfile
-import urllib.error
-import urllib.request
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -185,6 +183,9 @@ def plan(dataset: str, sequence: str) -> list[Archive]:
 # -- transfer ------------------------------------------------------------------------------------------
 def _fetch(archive: Archive, target: Path, progress: Callable[[int, int | None], None] | None) -> Path:
     """Stream ``archive.url`` to ``target`` (resuming ``target.part``); returns ``target``."""
+    import urllib.error  # here, not at the top: `dmtrack run` builds the command line with this module (11 ms)
+    import urllib.request
+
     if target.is_file():
         return target
     part = target.with_name(target.name + ".part")

@@ -12,14 +12,20 @@ frame of the window again, with the run's feature, against this map.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from dmtrack.features.images import prepare_image
 from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.odometry.config import VOConfig
-from dmtrack.odometry.depthmap import DepthMap
-from dmtrack.odometry.frame import Frame, build_frame
 from dmtrack.odometry.initial_map import InitialMap
+
+if TYPE_CHECKING:
+    from dmtrack.odometry.frame import Frame
+
+# the depth map's and the frames' modules (numba's kernels) are imported when the first map is made, not with this
+# module: a run's start reads and tracks its first frames while the main thread imports them
 
 __all__ = ["grey_frame", "make_first_map"]
 
@@ -27,6 +33,8 @@ __all__ = ["grey_frame", "make_first_map"]
 def grey_frame(index: int, timestamp: float, image: np.ndarray, camera: PinholeCamera, levels: int,
                use_numba: bool = True) -> Frame:  # fmt: skip
     """A grey :class:`~dmtrack.odometry.frame.Frame` (intensity 0..255, as the ``gray`` feature) of an image."""
+    from dmtrack.odometry.frame import build_frame
+
     grey = prepare_image(image, colour=False).astype(np.float32)
     return build_frame(index, timestamp, image, grey, camera, levels, use_numba)
 
@@ -57,6 +65,8 @@ def make_first_map(
     InitialMap, list of (4, 4)
         The map (mean inverse depth 1) and the same poses with their translations in the map's units.
     """
+    from dmtrack.odometry.depthmap import DepthMap
+
     ic = config.initializer
     poses = [np.array(T, np.float64) for T in poses]
     dm = DepthMap(config.depth, parallel=parallel, channel_cost="sum")

@@ -5,12 +5,22 @@ Main entry point: :class:`VisualOdometry`. Pieces: :func:`build_frame` (feature 
 and the :class:`OutputSink` protocol.
 """
 
-from dmtrack.odometry.config import DepthConfig, KeyframeConfig, TrackerConfig, VOConfig
-from dmtrack.odometry.depthmap import DepthMap
-from dmtrack.odometry.frame import Frame, Level, build_frame
-from dmtrack.odometry.sink import KeyframeSnapshot, OutputSink
-from dmtrack.odometry.tracker import ReferenceLevel, Tracker, TrackingReference, TrackResult
-from dmtrack.odometry.vo import FrameResult, KeyframeRecord, VisualOdometry, VOResult, keyframe_score
+from __future__ import annotations
+
+from dmtrack.io.machine import lazy_exports
+
+# imported on first use (PEP 562): the configuration, the sink protocol and the first map's record are read without
+# numba and the kernels' modules (what `dmtrack run` imports before it can start reading frames)
+_WHERE = {
+    "DepthConfig": "config", "KeyframeConfig": "config", "TrackerConfig": "config", "VOConfig": "config",
+    "DepthMap": "depthmap",
+    "Frame": "frame", "Level": "frame", "build_frame": "frame",
+    "KeyframeSnapshot": "sink", "OutputSink": "sink",
+    "ReferenceLevel": "tracker", "Tracker": "tracker", "TrackingReference": "tracker", "TrackResult": "tracker",
+    "FrameResult": "vo", "KeyframeRecord": "vo", "VisualOdometry": "vo", "VOResult": "vo", "keyframe_score": "vo",
+}  # fmt: skip
+
+__getattr__, __dir__ = lazy_exports(__name__, _WHERE)
 
 __all__ = [
     "DepthConfig",

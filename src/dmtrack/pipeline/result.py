@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,7 +15,9 @@ from dmtrack.geometry.camera import PinholeCamera
 from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry._target import kernel_target
 from dmtrack.odometry.config import VOConfig
-from dmtrack.odometry.vo import VOResult
+
+if TYPE_CHECKING:
+    from dmtrack.odometry.vo import VOResult  # the odometry's kernels: not imported with the results
 
 #: Default r_l (longest RPE length / path length) per dataset format (paper §3.1).
 R_L_BY_FORMAT = {"kitti": 1.0 / 20.0, "tsukuba": 1.0 / 20.0}
@@ -63,9 +65,11 @@ class RunResult:
         0 when this process had warmed up the feature and configuration already, or without warm-up).
     startup
         Where the time before the first frame went, ``metrics.json``'s ``startup``: ``import_s`` (the process's age
-        when dmtrack's run modules had been imported: interpreter and imports), ``run_s`` (its age when the run
-        began: also the command line and opening the sequence), ``warmup_s`` (the kernels compiled or loaded from
-        numba's cache), ``start_s`` (the geometric start beyond the warm-up it runs beside) and ``first_frame_s``
+        when dmtrack's run modules had been imported: interpreter and imports, numba's aside), ``run_s`` (its age
+        when the run began: also the command line and opening the sequence), ``odometry_import_s`` (the odometry
+        built: numba and the kernels' modules imported, beside the start), ``warmup_s`` (the kernels compiled or
+        loaded from numba's cache), ``start_s`` (the geometric start beyond the import and the warm-up it runs
+        beside) and ``first_frame_s``
         (the process's age when the odometry had finished its first frame). Ages are seconds since the process
         started (:func:`dmtrack.io.machine.process_age_s`; ``None`` off Linux): for ``dmtrack run``, since it was
         launched.

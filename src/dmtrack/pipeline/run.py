@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import time
 import warnings
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,10 +31,12 @@ from dmtrack.io.machine import process_age_s, release_free_memory, release_idle_
 from dmtrack.io.trajectory import Trajectory
 from dmtrack.odometry.config import CHANNEL_STAT_KEYS, VOConfig
 from dmtrack.odometry.sink import OutputSink
-from dmtrack.odometry.vo import VisualOdometry, VOResult
 from dmtrack.outputs.memory import MultiSink
 from dmtrack.pipeline.result import DEFAULT_R_L, R_L_BY_FORMAT, RunResult, metrics_dict
 from dmtrack.pipeline.signals import _StopBetweenFrames
+
+if TYPE_CHECKING:
+    from dmtrack.odometry.vo import VOResult
 
 #: What the frame source yields for frame i: timestamp, cropped image, feature map, io and feature seconds, and
 #: the first frame's depth image for ``init="groundtruth"`` (else None).
@@ -119,9 +122,10 @@ class SequenceRun:
                            for c in configs]  # fmt: skip
         # the back end first: it closes (its final optimisation, told to a viewer) before the run's sinks close
         sinks = [_sinks(r and r.store, b, s) for s, b, r in zip(sinks, self.slams, self.recoveries, strict=True)]
-        self.vos = [VisualOdometry(self.camera, c, sink=s, window=_window(c, self.camera))
-                    for c, s in zip(configs, sinks, strict=True)]  # fmt: skip
-        self._attach()
+        # the odometries are built by run(), beside the start: their modules (numba's kernels) are imported then
+        self._odometries = [(c, s, _window(c, self.camera)) for c, s in zip(configs, sinks, strict=True)]
+        self.vos: list[Any] = []
+        self._abandon_start = False  # the run failed before its start finished: the start stops reading
         self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self._first = True  # the first frame prepared is the first the odometry gets (its depth initialises it)
         self._read_frame = getattr(seq, "read_frame", None)
@@ -129,6 +133,7 @@ class SequenceRun:
         self.t_io = self.t_feat = self.compile_s = 0.0
         self.t_start = 0.0  # perf_counter() when the run's clock (wall_s, fps) starts: after the warm-up
         self.startup: dict[str, float | None] = {}  # metrics.json's "startup" (run(), _begin(), _loop())
+        self.releases_memory = True  # give freed memory and LLVM's idle pages back (not the warm-up's own run: 26 ms)
 
     def _attach(self) -> None:
         for vo, r in zip(self.vos, self.recoveries, strict=True):
@@ -205,10 +210,10 @@ class SequenceRun:
         watch = getattr(live_source(self.seq), "watch_stop", None)
         if callable(watch):  # a live source that waits for frames (the ROS node's) stops waiting on Ctrl-C
             watch(lambda: stops.pending is not None)
-        self.startup = {"import_s": IMPORTED_AT, "run_s": process_age_s(), "warmup_s": None, "start_s": None,
-                        "first_frame_s": None}
+        self.startup = {"import_s": IMPORTED_AT, "run_s": process_age_s(), "odometry_import_s": None,
+                        "warmup_s": None, "start_s": None, "first_frame_s": None}
         frames = self._frames(stops)
-        run_start = RunStart(self.camera, self.configs, parallel=self.vos[0].parallel)
+        run_start = RunStart(self.camera, self.configs, parallel=_kernel_threads() > 1)
         self.t_start = time.perf_counter()
         try:
             self._begin(run_start, stops, warmup)
@@ -241,23 +246,36 @@ class SequenceRun:
         with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start") as pool:
             starting = pool.submit(self._start, run_start, stops)
             try:
-                release_idle_library_pages()  # LLVM's pages that numba's import touched; the warm-up reads back some
+                t0 = time.perf_counter()
+                self._build_odometries()  # imports numba and the kernels while the start reads and tracks (0.15 s)
+                self.startup["odometry_import_s"] = time.perf_counter() - t0
+                if self.releases_memory:
+                    release_idle_library_pages()  # LLVM's pages that numba's import touched; the warm-up reads some
                 if warmup:
                     self.compile_s = sum(warm_up(self.feature, c) for c in self.configs)
                     if any(s is not None for s in self.slams):
                         self.compile_s += _warm_up_slam()
                     release_idle_library_pages()  # the kernels are loaded; the start may still read some back
+            except BaseException:
+                self._abandon_start = True
+                raise
             finally:
                 self.t_start = time.perf_counter()
                 starting.result()
         self.startup.update(warmup_s=self.compile_s if warmup else None, start_s=time.perf_counter() - self.t_start)
-        release_free_memory()  # what the warm-up and the start freed (their frames, maps, threads' heaps)
-        release_idle_library_pages()  # what the start read back (a kernel loaded later reads back what it needs)
         for reason in dict.fromkeys(r for r in (run_start.refusal(c) for c in self.configs) if r):  # in metrics
             warnings.warn(f"geometric start refused, starting from a random map: {reason}", stacklevel=6)
+        from dmtrack.odometry.vo import VisualOdometry
+
         self.vos = [vo if c is vo.config else VisualOdometry(self.camera, c, sink=vo.sink,
                                                              window=_window(c, self.camera))
                     for vo, c in ((vo, run_start.config_for(vo.config)) for vo in self.vos)]  # fmt: skip
+        self._attach()
+
+    def _build_odometries(self) -> None:
+        from dmtrack.odometry.vo import VisualOdometry
+
+        self.vos = [VisualOdometry(self.camera, c, sink=s, window=w) for c, s, w in self._odometries]
         self._attach()
 
     def _start(self, run_start: RunStart, stops: _StopBetweenFrames) -> None:
@@ -273,7 +291,8 @@ class SequenceRun:
         with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start-read") as reader:
             ahead: deque[tuple[int, Any]] = deque()
             nxt = i
-            while run_start.collecting and (self.stop is None or i < self.stop) and stops.pending is None:
+            while (run_start.collecting and (self.stop is None or i < self.stop) and stops.pending is None
+                   and not self._abandon_start):
                 while len(ahead) < 3 and (self.stop is None or nxt < self.stop):
                     ahead.append((nxt, reader.submit(self._read, nxt)))
                     nxt += 1
@@ -318,6 +337,12 @@ class SequenceRun:
                     run_start.release_maps()
             if self.startup.get("first_frame_s") is None:
                 self.startup["first_frame_s"] = process_age_s()
+                # after the first frame, not before it (12 ms): what the warm-up and the start freed (their frames,
+                # maps, threads' heaps), and LLVM's pages the start read back (a kernel loaded later reads back what
+                # it needs)
+                if self.releases_memory:
+                    release_free_memory()
+                    release_idle_library_pages()
             if bar is not None:
                 bar.update(i + 1 - self.start - bar.n)
                 bar.set_postfix_str(f"kf {self.vos[0].n_keyframes}", refresh=False)
@@ -384,6 +409,20 @@ class SequenceRun:
             result.metrics = metrics_dict(result, seq, self.feature, config, self.camera, self.start, r_l)
             out.append(result)
         return out
+
+
+def _kernel_threads() -> int:
+    """numba's thread count for this thread's kernels; before numba is imported, the count it will start with
+    (``NUMBA_NUM_THREADS``, else the cores this process may run on). It only decides whether the start's first map
+    uses threads, which never changes its values."""
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        return int(numba.get_num_threads())
+    env = os.environ.get("NUMBA_NUM_THREADS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    affinity = getattr(os, "sched_getaffinity", None)  # Linux
+    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1
 
 
 def _window(config: VOConfig, camera: PinholeCamera) -> Any:
@@ -506,7 +545,9 @@ def warm_up(feature: Any, config: VOConfig | None = None, *, strict: bool = Fals
         key = (feat.name, config, numba.get_num_threads())
         if key in _WARMED:
             return 0.0
-        result = SequenceRun(_WarmupSequence(), feat, [config], [None]).run(warmup=False, progress=False)[0]
+        run = SequenceRun(_WarmupSequence(), feat, [config], [None])
+        run.releases_memory = False  # the run it warms up does that, after it
+        result = run.run(warmup=False, progress=False)[0]
         if result.halted_by is not None:
             raise result.halted_by
         from dmtrack.odometry._cloud import warm_up as warm_up_points

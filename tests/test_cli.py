@@ -233,7 +233,7 @@ def test_run_starts_before_numba_is_imported():
     setup = ("import dmtrack.api, dmtrack.cli, dmtrack.pipeline.run, dmtrack.initialization.run_start\n"
              "import dmtrack.outputs.run_directory, dmtrack.odometry.config\n"
              "from dmtrack.features import get_feature\n"
-             "get_feature('gray')\n")
+             "get_feature('gray'), get_feature('bitplanes'), get_feature('rgb')\n")
     heavy = ("numba", "llvmlite", "dmtrack.odometry.vo", "dmtrack.odometry.depthmap", "dmtrack.odometry.tracker")
     assert _modules_after(setup, heavy) == "[]"
 

@@ -17,7 +17,6 @@ Without pre-smoothing the map is invariant to any strictly increasing intensity 
 from __future__ import annotations
 
 import cv2
-import numba
 import numpy as np
 
 from dmtrack.features.base import Feature
@@ -53,28 +52,6 @@ def census_bits(image: np.ndarray) -> np.ndarray:
     return bits
 
 
-@numba.njit(cache=True, nogil=True)
-def _census_planes_kernel(img: np.ndarray, value: np.float32, out: np.ndarray) -> None:  # pragma: no cover
-    """Every pixel of ``out`` (h, w, 8): ``value`` where bit b of :func:`census_bits` is set, else 0."""
-    h, w = img.shape
-    zero = np.float32(0.0)
-    for y in range(h):
-        for x in range(w):
-            if y == 0 or y == h - 1 or x == 0 or x == w - 1:
-                for b in range(8):
-                    out[y, x, b] = zero
-                continue
-            c = img[y, x]
-            out[y, x, 0] = value if img[y - 1, x - 1] >= c else zero
-            out[y, x, 1] = value if img[y - 1, x] >= c else zero
-            out[y, x, 2] = value if img[y - 1, x + 1] >= c else zero
-            out[y, x, 3] = value if img[y, x - 1] >= c else zero
-            out[y, x, 4] = value if img[y, x + 1] >= c else zero
-            out[y, x, 5] = value if img[y + 1, x - 1] >= c else zero
-            out[y, x, 6] = value if img[y + 1, x] >= c else zero
-            out[y, x, 7] = value if img[y + 1, x + 1] >= c else zero
-
-
 def census_planes(image: np.ndarray, value: float = 1.0) -> np.ndarray:
     """``census_bits(image) × value`` as ``(H, W, 8)`` float32 in one numba pass (the same values: a set bit is
     ``float32(value)``, a clear one 0)."""
@@ -83,8 +60,10 @@ def census_planes(image: np.ndarray, value: float = 1.0) -> np.ndarray:
         raise ValueError(f"census_planes needs an (H, W) image, got shape {img.shape}")
     if img.dtype not in (np.uint8, np.float32, np.float64):
         img = img.astype(np.float64)  # exact for the integer types: the same comparisons
+    from dmtrack.features._census import census_planes_kernel  # numba: imported with the first image, not the feature
+
     out = np.empty(img.shape + (8,), np.float32)
-    _census_planes_kernel(img, np.float32(value), out)
+    census_planes_kernel(img, np.float32(value), out)
     return out
 
 

@@ -36,7 +36,7 @@ from dmtrack.pipeline.result import DEFAULT_R_L, R_L_BY_FORMAT, RunResult, metri
 from dmtrack.pipeline.signals import _StopBetweenFrames
 
 if TYPE_CHECKING:
-    from dmtrack.odometry.vo import VOResult
+    from dmtrack.odometry.vo import VisualOdometry, VOResult
 
 #: What the frame source yields for frame i: timestamp, cropped image, feature map, io and feature seconds, and
 #: the first frame's depth image for ``init="groundtruth"`` (else None).
@@ -71,8 +71,9 @@ def for_feature(config: VOConfig, feat: Any) -> VOConfig:
 class SequenceRun:
     """One pass of one or several odometries over ``frames start … start + max_frames − 1`` of ``seq``.
 
-    The constructor checks the arguments (a clear :class:`~dmtrack.errors.InputError` before any frame is read)
-    and builds the odometries; :meth:`run` drives them and returns one :class:`RunResult` per configuration.
+    The constructor checks the arguments (a clear :class:`~dmtrack.errors.InputError` before any frame is read);
+    :meth:`run` builds the odometries (importing numba and the kernels' modules while the geometric start already
+    reads the first frames), drives them and returns one :class:`RunResult` per configuration.
     """
 
     def __init__(
@@ -124,7 +125,7 @@ class SequenceRun:
         sinks = [_sinks(r and r.store, b, s) for s, b, r in zip(sinks, self.slams, self.recoveries, strict=True)]
         # the odometries are built by run(), beside the start: their modules (numba's kernels) are imported then
         self._odometries = [(c, s, _window(c, self.camera)) for c, s in zip(configs, sinks, strict=True)]
-        self.vos: list[Any] = []
+        self.vos: list[VisualOdometry] = []
         self._abandon_start = False  # the run failed before its start finished: the start stops reading
         self.recompute = getattr(feat, "pyramid", "downsample") == "recompute"
         self._first = True  # the first frame prepared is the first the odometry gets (its depth initialises it)
@@ -239,8 +240,9 @@ class SequenceRun:
         return self._results(results, run_start, frames, halted_by, time.perf_counter() - self.t_start, r_l)
 
     def _begin(self, run_start: RunStart, stops: _StopBetweenFrames, warmup: bool) -> None:
-        """The warm-up and, beside it, the geometric start (the run's clock, ``t_start``, starts after the
-        warm-up); the odometries that could not start geometrically are replaced by their fall-back."""
+        """The odometries built and the warm-up and, beside them, the geometric start (the run's clock, ``t_start``,
+        starts after the warm-up); the odometries that could not start geometrically are replaced by their
+        fall-back. An error before the start has finished stops it at its next frame."""
         # the geometric start (OpenCV, numpy: mostly without the GIL) reads the first frames beside the warm-up;
         # what it takes beyond the warm-up counts in wall_s
         with ThreadPoolExecutor(1, thread_name_prefix="dmtrack-start") as pool:

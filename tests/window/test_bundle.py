@@ -205,6 +205,20 @@ def test_window_converges_to_the_truth(window) -> None:
     assert report.cost_after < report.cost_before and report.iterations > 3
 
 
+def test_cost_before_and_after_are_taken_at_the_same_level(window) -> None:
+    """The report's costs are both at the finest level (the levels' costs are not comparable): with no iteration
+    allowed nothing moves and the two are equal; with iterations the cost after is the lower."""
+    cam = window[0].camera
+    for iterations in (0, 6):
+        cfg = WindowConfig(size=5, depth_prior=0.0, levels=(2, 1), iterations=iterations)
+        kfs, _, _ = _keyframes(window, cfg)
+        report = PhotometricBundle(cfg, (cam.fx, cam.fy, cam.cx, cam.cy), (cam.width, cam.height)).optimise(kfs)
+        if iterations == 0:
+            assert report.iterations == 0 and report.cost_after == report.cost_before
+        else:
+            assert report.iterations > 0 and report.cost_after < report.cost_before
+
+
 def test_focal_length_10_percent_off_is_recovered_within_1_percent(window) -> None:
     cfg = WindowConfig(size=5, depth_prior=0.0, levels=(4, 3, 2, 1, 0), iterations=20, refine_intrinsics=True)
     kfs, _, _ = _keyframes(window, cfg, perturb=False)

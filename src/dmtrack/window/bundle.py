@@ -59,8 +59,9 @@ class WindowKeyframe:
 
 @dataclass
 class BundleReport:
-    """What one optimisation did: cost before and after, accepted iterations, residuals used (inliers) and
-    outliers at the end, and the intrinsics with their standard deviations when they were estimated."""
+    """What one optimisation did: cost before and after (both at the finest level), accepted iterations, residuals
+    used (inliers) and outliers at the end, and the intrinsics with their standard deviations when they were
+    estimated."""
 
     cost_before: float
     cost_after: float
@@ -293,6 +294,10 @@ class PhotometricBundle:
         d_start = [None if d is None else d.copy() for d in depths]
         K = self.intrinsics.copy()
         first_cost = None
+        if len(self.config.levels) > 1:  # the cost before at the finest level, where the cost after is taken: the
+            # levels' costs are not comparable (other residuals, other scales; Bit-Planes' coarse cost is lower)
+            start = self._system(kfs, poses, depths, K, self.config.levels[-1], True)
+            first_cost = float(start[5][kern.S_COST]) + self._priors(kfs, poses, depths, d_start, K, None)
         its = 0
         last = None
         n_pose = self._n_pose(len(kfs))

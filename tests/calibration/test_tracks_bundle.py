@@ -218,10 +218,13 @@ def test_the_radtan_file_spells_out_its_output_camera(tmp_path):
     from dmtrack.datasets.undistort import read_calibration_file
     from dmtrack.pipeline.self_calibration import SelfCalibration, write_intrinsics
 
-    calib = SelfCalibration(517.6672, 517.6672, 320.0, 240.0, {}, True, 640, 480, k1=-0.035908, method="tracks",
-                            model="f-k1")  # fmt: skip
+    calib = SelfCalibration(517.66723456, 517.66723456, 320.0, 240.0, {}, True, 640, 480, k1=-0.0359081234,
+                            method="tracks", model="f-k1")  # fmt: skip
     lines = write_intrinsics(calib, tmp_path / "cam.txt", "test").read_text().splitlines()
     assert lines[2] != "crop" and len(lines[2].split()) == 5
+    model = read_calibration_file(tmp_path / "cam.txt").model  # the estimate, read back exactly
+    assert (model.fx, model.fy, model.cx, model.cy, model.k1, model.k2, model.p1, model.p2) == (
+        calib.fx, calib.fy, calib.cx, calib.cy, calib.k1, 0.0, 0.0, 0.0)
     given = read_calibration_file(tmp_path / "cam.txt").undistorter()
     (tmp_path / "crop.txt").write_text("\n".join([lines[0], lines[1], "crop", lines[3]]) + "\n")
     crop = read_calibration_file(tmp_path / "crop.txt").undistorter()

@@ -239,3 +239,16 @@ def test_undistorted_sequence_wrapper(tmp_path: Path) -> None:
     assert len(und.slice(1, 3)) == 2
     with pytest.raises(InputError, match="calibration is for 100x80"):
         UndistortedSequence(seq, Undistorter.create(PinholeModel(50, 50, 50, 40, 100, 80), "crop"))
+
+
+def test_radtan_text_reads_back_exactly(tmp_path: Path) -> None:
+    """DSO's RadTan file as dmtrack writes it (the checkerboard calibration and calibrate-from-video share it): the
+    model read back is the model written, to the last bit; a k3, which the format cannot hold, is refused."""
+    from dmtrack.datasets.undistort import radtan_text
+
+    (tmp_path / "cam.txt").write_text(radtan_text(RADTAN, "crop"))
+    got = read_calibration_file(tmp_path / "cam.txt")
+    assert got.model == RADTAN and (tmp_path / "cam.txt").read_text().splitlines()[1:] == [f"{W} {H}", "crop",
+                                                                                             f"{W} {H}"]  # fmt: skip
+    with pytest.raises(ValueError, match="k3"):
+        radtan_text(RadTanModel(160.0, 158.0, 101.0, 74.0, W, H, k1=-0.2, k3=0.01), "crop")

@@ -41,7 +41,7 @@ import numpy as np
 
 from dmtrack.datasets.imagefolder import list_images
 from dmtrack.datasets.stream import CaptureFactory, capture_target, is_stream
-from dmtrack.datasets.undistort import crop_camera, crop_output_line, read_calibration_file
+from dmtrack.datasets.undistort import crop_camera, crop_output_line, radtan_text, read_calibration_file
 from dmtrack.datasets.video import detect as is_video
 from dmtrack.errors import DmtrackError, InputError, OutputError
 from dmtrack.geometry.camera import PinholeCamera
@@ -383,10 +383,8 @@ class CameraCalibration:
     def dso_text(self, output: Literal["crop", "full"] = "crop") -> str:
         """The 4-line DSO calibration file (numbers written to round-trip exactly); ``crop``'s output camera is
         written out (:func:`~dmtrack.datasets.undistort.crop_output_line`: DSO's own ``crop`` folds k1 < 0 lenses)."""
-        w, h = self.image_size
-        numbers = " ".join(repr(float(v)) for v in (self.fx, self.fy, self.cx, self.cy, *self.coefficients))
-        line3 = crop_output_line(self.model(), (w, h)) if output == "crop" else output
-        return f"RadTan {numbers}\n{w} {h}\n{line3}\n{w} {h}\n"
+        model = self.model()
+        return radtan_text(model, crop_output_line(model, self.image_size) if output == "crop" else output)
 
     def to_dict(self) -> dict[str, Any]:
         k1, k2, p1, p2 = self.coefficients

@@ -611,6 +611,16 @@ def crop_output_line(model: CameraModel, size: tuple[int, int]) -> str:
     return f"{cam.fx / w!r} {cam.fy / h!r} {(cam.cx + 0.5) / w!r} {(cam.cy + 0.5) / h!r} 0"
 
 
+def radtan_text(model: RadTanModel, line3: str) -> str:
+    """The 4-line DSO calibration file of ``model``: ``RadTan fx fy cx cy k1 k2 p1 p2``, the size, ``line3`` (the
+    output: ``crop``, ``full``, or a camera such as :func:`crop_output_line`'s) and the size again. The numbers are
+    written to read back exactly; DSO's format has no k3, so it must be 0."""
+    if model.k3 != 0.0:
+        raise ValueError(f"DSO's RadTan file has no k3, got k3 = {model.k3!r}")
+    numbers = " ".join(repr(float(v)) for v in (model.fx, model.fy, model.cx, model.cy, *model.coefficients[:4]))
+    return f"RadTan {numbers}\n{model.width} {model.height}\n{line3}\n{model.width} {model.height}\n"
+
+
 def undistort_sequence(seq: Any, calibration: CalibrationFile, multiple: int = MULTIPLE) -> Any:
     """``seq`` wrapped in an :class:`UndistortedSequence`, or ``seq`` itself when nothing changes."""
     und = calibration.undistorter(multiple)

@@ -66,9 +66,10 @@ def write_intrinsics(calib: SelfCalibration, path: str | Path, source: str) -> P
     (:func:`_radtan_output`)."""
     p = Path(path)
     if calib.model == "f-k1":
-        text = (f"RadTan {calib.fx:.4f} {calib.fy:.4f} {calib.cx:.4f} {calib.cy:.4f} {calib.k1:.6f} 0 0 0\n"
-                f"{calib.width} {calib.height}\n{_radtan_output(calib)}\n{calib.width} {calib.height}\n")  # fmt: skip
-        write_text(p, text)
+        from dmtrack.datasets.undistort import radtan_text
+
+        model = _radtan_model(calib)
+        write_text(p, radtan_text(model, _radtan_output(model)))
         return p
     how = {"tracks": "self-calibrating bundle adjustment of corner tracks",
            "groundtruth": "bundle adjustment of corner tracks on the ground-truth poses"}.get(
@@ -185,17 +186,21 @@ def calibrate_from_video(
     return SelfCalibration(K[0], K[1], K[2], K[3], sigma, converged, width, height, history)
 
 
-def _radtan_output(calib: SelfCalibration) -> str:
+def _radtan_model(calib: SelfCalibration) -> Any:
+    """The estimate as a RadTan model (k1 only)."""
+    from dmtrack.geometry.distortion import RadTanModel
+
+    return RadTanModel(calib.fx, calib.fy, calib.cx, calib.cy, calib.width, calib.height, calib.k1, 0.0, 0.0, 0.0)
+
+
+def _radtan_output(model: Any) -> str:
     """Line 3 of the ``RadTan`` file: ``crop``'s output camera written out (DSO's own ``crop`` folds the image of a
     k1 < 0 lens; :func:`~dmtrack.datasets.undistort.crop_output_line`), or ``crop`` where none is valid."""
     from dmtrack.datasets.undistort import crop_output_line
     from dmtrack.errors import DatasetError
-    from dmtrack.geometry.distortion import RadTanModel
 
-    w, h = calib.width, calib.height
     try:
-        return crop_output_line(RadTanModel(calib.fx, calib.fy, calib.cx, calib.cy, w, h, calib.k1, 0.0, 0.0, 0.0),
-                                (w, h))  # fmt: skip
+        return crop_output_line(model, (model.width, model.height))
     except (DatasetError, InputError, ValueError):
         return "crop"  # no valid crop: the reader says why
 

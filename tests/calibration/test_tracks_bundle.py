@@ -234,6 +234,17 @@ def test_the_radtan_file_spells_out_its_output_camera(tmp_path):
         assert a == pytest.approx(b, abs=1e-4)
 
 
+def test_an_estimate_that_is_not_a_camera_writes_no_file(tmp_path):
+    from dmtrack.errors import InputError
+    from dmtrack.pipeline.self_calibration import SelfCalibration, write_intrinsics
+
+    calib = SelfCalibration(500.0, 500.0, 320.0, 240.0, {}, False, 640, 480, k1=float("nan"), method="tracks",
+                            model="f-k1")  # fmt: skip
+    with pytest.raises(InputError, match="k1 must be finite"):
+        write_intrinsics(calib, tmp_path / "cam.txt", "test")
+    assert not (tmp_path / "cam.txt").exists()
+
+
 def test_the_window_method_takes_no_k1(tmp_path, capsys):
     from dmtrack.cli import main
 

@@ -187,10 +187,14 @@ def calibrate_from_video(
 
 
 def _radtan_model(calib: SelfCalibration) -> Any:
-    """The estimate as a RadTan model (k1 only)."""
+    """The estimate as a RadTan model (k1 only); an estimate that is not one (not finite) is a clear error, and no
+    file is written."""
     from dmtrack.geometry.distortion import RadTanModel
 
-    return RadTanModel(calib.fx, calib.fy, calib.cx, calib.cy, calib.width, calib.height, calib.k1, 0.0, 0.0, 0.0)
+    try:
+        return RadTanModel(calib.fx, calib.fy, calib.cx, calib.cy, calib.width, calib.height, calib.k1, 0.0, 0.0, 0.0)
+    except ValueError as e:
+        raise InputError(f"the estimate is not a camera ({e}): no calibration file written") from None
 
 
 def _radtan_output(model: Any) -> str:

@@ -39,7 +39,7 @@ def read_pose_file(path: Path) -> np.ndarray:
     The stored rotation blocks are not quite orthonormal (KinectFusion's matrices are scaled by
     ~0.9997); they are projected to the nearest rotation (SVD), which moves no entry by more than 1e-3.
     """
-    fields = read_text_file(path, "pose file").replace(",", " ").split()
+    fields = _pose_fields(path)
     try:
         values = np.asarray([float(f) for f in fields], dtype=np.float64)
     except ValueError:
@@ -64,31 +64,31 @@ def read_pose_file(path: Path) -> np.ndarray:
 def read_pose_files(paths: list[Path]) -> np.ndarray:
     """(n, 4, 4): :func:`read_pose_file` of each path, the same values, the checks and the projection done on all at
     once (a 700-frame folder opens 20 ms sooner). Any file that one would refuse: the first such file's error, as the
-    files are read in order."""
+    files are read in order (by :func:`read_pose_file`, file by file)."""
     rows = np.empty((len(paths), 16))
     for i, path in enumerate(paths):
-        fields = read_text_file(path, "pose file").replace(",", " ").split()
         try:
-            values = [float(f) for f in fields]
-        except ValueError:
-            values = []
-        if len(values) != 16:
-            return np.stack([read_pose_file(p) for p in paths])  # raises this file's error (or an earlier one's)
-        rows[i] = values
+            rows[i] = [float(f) for f in _pose_fields(path)]
+        except ValueError:  # not a number, or not 16 of them
+            return np.stack([read_pose_file(p) for p in paths])
     poses = rows.reshape(-1, 4, 4)
     finite = np.isfinite(rows).all(axis=1)
     poses[~finite] = np.nan
     ok = poses[finite]
-    if len(ok):
-        if np.abs(ok).max() > 1e150 or not np.allclose(ok[:, 3], (0.0, 0.0, 0.0, 1.0), atol=1e-6):
-            return np.stack([read_pose_file(p) for p in paths])
+    if not len(ok):
+        return poses
+    if np.abs(ok).max() <= 1e150 and np.allclose(ok[:, 3], (0.0, 0.0, 0.0, 1.0), atol=1e-6):  # before the SVD
         u, sv, vt = np.linalg.svd(ok[:, :3, :3])
         rot = u @ vt
-        if (np.linalg.det(rot) < 0).any() or np.abs(sv - 1.0).max() > 0.05:
-            return np.stack([read_pose_file(p) for p in paths])
-        ok[:, :3, :3] = rot
-        poses[finite] = ok
-    return poses
+        if not (np.linalg.det(rot) < 0).any() and np.abs(sv - 1.0).max() <= 0.05:
+            ok[:, :3, :3] = rot
+            poses[finite] = ok
+            return poses
+    return np.stack([read_pose_file(p) for p in paths])
+
+
+def _pose_fields(path: Path) -> list[str]:
+    return read_text_file(path, "pose file").replace(",", " ").split()
 
 
 def _is_number(text: str) -> bool:
